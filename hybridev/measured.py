@@ -95,7 +95,7 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
             extra.append(pd.DataFrame({
                 "row": good.index[bad], "field": "soc_final", "value": sf[bad],
                 "reason": [f"soc_final={a!r} is above soc_initial={b!r}"
-                           for a, b in zip(sf[bad], s0[bad], strict=True)]}))
+                           for a, b in zip(sf[bad].tolist(), s0[bad].tolist(), strict=True)]}))
             good = good.loc[~bad]
     if "energy_kwh" not in good.columns:
         sf = good["soc_final"].to_numpy(float)

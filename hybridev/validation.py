@@ -121,7 +121,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
         vals = np.asarray(values, dtype=object)[new]
         reasons.append(pd.DataFrame({
             "row": out.index[new], "field": field, "value": vals,
-            "reason": [f"{field}={v!r} outside allowed {allowed}" for v in vals]}))
+            "reason": [f"{field}={v!r} outside allowed {allowed}" for v in vals.tolist()]}))
         bad_any |= mask
 
     for field, rule in rules.items():
