@@ -34,11 +34,13 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.special import ndtri
 
 from .params import DrivingProfile, get_profile
 
 __all__ = [
     "MIN_STEPS_PER_CYCLE",
+    "keyed_normals",
     "positive_kinetic_energy",
     "profile_table",
     "synthesize_speed_trace",
@@ -73,9 +75,45 @@ def profile_table(profile, n: int, fields: tuple[str, ...]) -> dict[str, np.ndar
     return out
 
 
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+def _splitmix64(x: np.ndarray) -> np.ndarray:
+    """The splitmix64 finaliser: a bijective avalanche hash on uint64."""
+    x = x + _GOLDEN
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _keys(trip_keys, n: int) -> np.ndarray:
+    if trip_keys is None:
+        return np.arange(n, dtype=np.uint64)
+    k = np.asarray(trip_keys)
+    if k.shape != (n,):
+        raise ValueError(f"trip_keys must have shape ({n},); got {k.shape}")
+    if k.dtype.kind in "iu":
+        return k.astype(np.uint64)
+    return pd.util.hash_array(k.astype(object))
+
+
+def keyed_normals(seed: int, keys: np.ndarray, n_cols: int) -> np.ndarray:
+    """Standard normals ``(len(keys), n_cols)`` that depend only on ``(seed, key, column)``.
+
+    A counter-based generator (splitmix64 of the three counters, then the
+    inverse normal CDF): vectorised, and each trip's draws are independent of
+    which other trips are in the batch.
+    """
+    with np.errstate(over="ignore"):
+        s = _splitmix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) + np.zeros(1, np.uint64))
+        k = _splitmix64(keys.astype(np.uint64)[:, None] ^ s)
+        x = _splitmix64(k + np.arange(n_cols, dtype=np.uint64)[None, :] * _GOLDEN)
+    u = ((x >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+    return ndtri(u)
+
+
 def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_steps: int = 1000,
-                           rng: np.random.Generator | int | None = 0
-                           ) -> tuple[np.ndarray, np.ndarray]:
+                           seed: int = 0, trip_keys=None) -> tuple[np.ndarray, np.ndarray]:
     """Generate kinematically consistent speed traces for trips.
 
     Parameters
@@ -89,8 +127,13 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
         cycle period and perturbation size.
     n_steps : int
         Number of intervals ``N`` (the trace has ``N + 1`` samples).
-    rng : numpy.random.Generator or int or None
-        Source of randomness (an int is a seed). Same seed, same traces.
+    seed : int
+        Seed of the speed perturbation. Same seed, same traces.
+    trip_keys : array_like (n_trips,), optional
+        Identifiers (ints or strings) of the trips; default ``0 .. n_trips-1``.
+        A trip's trace depends only on ``(seed, key, distance, speed,
+        profile)``, never on the other rows, so a subset of a table gets
+        exactly the traces it had in the full table.
 
     Returns
     -------
@@ -99,7 +142,7 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
 
     Examples
     --------
-    >>> v, dt = synthesize_speed_trace([100.0], [90.0], "normal", n_steps=1000, rng=1)
+    >>> v, dt = synthesize_speed_trace([100.0], [90.0], "normal", n_steps=1000, seed=1)
     >>> v.shape, float(dt[0])
     ((1, 1001), 4.0)
     >>> round(float((0.5 * (v[:, 1:] + v[:, :-1])).sum() * dt[0]), 6)   # metres
@@ -118,7 +161,6 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
     if n_steps < MIN_STEPS_PER_CYCLE:
         raise ValueError(f"n_steps={n_steps} is outside the allowed range "
                          f"[{MIN_STEPS_PER_CYCLE}, inf)")
-    rng = np.random.default_rng(rng)
     n = d.shape[0]
     prof = profile_table(profile, n, ("max_accel_mps2", "pke_mps2", "cycle_period_s",
                                              "amplitude_cv", "phase_fractions"))
@@ -148,7 +190,7 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
     max_c = int(n_cyc.max())
     cv = prof["amplitude_cv"][:, None]
     sig = np.sqrt(np.log1p(cv**2))
-    z = rng.standard_normal((n, max_c))
+    z = keyed_normals(seed, _keys(trip_keys, n), max_c)
     h_hi = np.minimum(h_cap, 2.0 * h0)[:, None]
     h = np.minimum(h0[:, None] * np.exp(sig * z - 0.5 * sig**2), h_hi)
     live = np.arange(max_c)[None, :] < n_cyc[:, None]

@@ -36,8 +36,7 @@ from .validation import validate_trips
 __all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces"]
 
 BLOCK_TRIPS = 1024
-"""Trips per block in :func:`simulate`. Each block draws from its own stream
-``default_rng([seed, block])``, so output does not depend on memory chunking."""
+"""Trips simulated per block (bounds memory; results do not depend on it)."""
 
 PAPER_SPEEDS_KMH = (40.0, 60.0, 80.0, 100.0, 120.0)
 PAPER_TEMPERATURES_C = (20.0, -5.0, 32.0)
@@ -92,10 +91,12 @@ def _blocks(trips: pd.DataFrame, n_steps: int, seed: int
     modes = trips["mode"].to_numpy(object)
     grade = (np.arctan(trips["grade_pct"].to_numpy(float) / 100.0)
              if "grade_pct" in trips.columns else None)
-    for b, start in enumerate(range(0, len(trips), BLOCK_TRIPS)):
+    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns
+            else np.arange(len(trips)))
+    for start in range(0, len(trips), BLOCK_TRIPS):
         sl = slice(start, start + BLOCK_TRIPS)
-        v, dt = synthesize_speed_trace(d[sl], s[sl], modes[sl], n_steps=n_steps,
-                                       rng=np.random.default_rng([seed, b]))
+        v, dt = synthesize_speed_trace(d[sl], s[sl], modes[sl], n_steps=n_steps, seed=seed,
+                                       trip_keys=keys[sl])
         yield sl, v, dt, (0.0 if grade is None else grade[sl, None])
 
 
@@ -117,7 +118,9 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
     n_steps : int
         Intervals per trip (the paper's ``N``).
     seed : int
-        Seed of the speed-trace randomness; same seed, same output.
+        Seed of the speed-trace randomness; same seed, same output. A trip's
+        trace depends on ``(seed, trip_id)`` (row position when there is no
+        ``trip_id`` column), not on the other rows.
     progress : callable, optional
         Called with the number of trips finished after each block.
 
