@@ -17,8 +17,10 @@ solved so that the time-mean speed is exactly ``v_bar``.
 
 Guarantees, for every trace (tested):
 
-* ``N`` intervals of ``dt = d * 1000 / (v_bar * 3.6 * N)`` s (the paper's rule),
-  so ``N + 1`` speed samples and duration ``d / v_bar``;
+* ``N`` intervals of ``dt = d * 1000 / ((v_bar / 3.6) * N) = 3600 d / (v_bar N)`` s,
+  so ``N + 1`` speed samples and duration ``d / v_bar`` (the paper prints
+  ``d * 1000 / (v_bar * 3.6 * N)``, which for ``v_bar`` in km/h is 12.96 times
+  too short; its own tables need the true duration);
 * distance ``sum(v' dt)`` (interval-mean speed) equals ``d`` to rounding;
 * mean speed equals ``v_bar``; ``|dv/dt| <= max_accel_mps2``; ``v >= 0``;
 * start and end speeds are equal (whole cycles), so no net kinetic energy.
@@ -112,6 +114,21 @@ def keyed_normals(seed: int, keys: np.ndarray, n_cols: int) -> np.ndarray:
     return ndtri(u)
 
 
+_MAX_STEPS = 1_000_000
+
+
+def _check_steps(n_steps) -> int:
+    """``n_steps`` as an int in [MIN_STEPS_PER_CYCLE, 1e6], else a ValueError naming it."""
+    try:
+        ok = float(n_steps) == int(n_steps)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or not MIN_STEPS_PER_CYCLE <= int(n_steps) <= _MAX_STEPS:
+        raise ValueError(f"n_steps={n_steps!r} is outside the allowed range: an integer in "
+                         f"[{MIN_STEPS_PER_CYCLE}, {_MAX_STEPS}]")
+    return int(n_steps)
+
+
 def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_steps: int = 1000,
                            seed: int = 0, trip_keys=None) -> tuple[np.ndarray, np.ndarray]:
     """Generate kinematically consistent speed traces for trips.
@@ -155,12 +172,9 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
         raise ValueError("distance_km and avg_speed_kmh must be scalars or 1-D arrays")
     for name, x in (("distance_km", d), ("avg_speed_kmh", vbar)):
         if not np.all(np.isfinite(x)) or np.any(x <= 0):
-            bad = x[~(np.isfinite(x) & (x > 0))][0]
+            bad = float(x[~(np.isfinite(x) & (x > 0))][0])
             raise ValueError(f"{name}={bad!r} is outside the allowed range (0, inf)")
-    n_steps = int(n_steps)
-    if n_steps < MIN_STEPS_PER_CYCLE:
-        raise ValueError(f"n_steps={n_steps} is outside the allowed range "
-                         f"[{MIN_STEPS_PER_CYCLE}, inf)")
+    n_steps = _check_steps(n_steps)
     n = d.shape[0]
     prof = profile_table(profile, n, ("max_accel_mps2", "pke_mps2", "cycle_period_s",
                                              "amplitude_cv", "phase_fractions"))
@@ -197,20 +211,32 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
     h = np.where(live, h, 0.0)
     base = vb_mps - w * h.sum(axis=1) / n_cyc
 
-    # Sample the piecewise-linear trace on the grid.
-    t = np.arange(n_steps + 1, dtype=float)[None, :] * dt[:, None]
-    x = t / period[:, None]
-    j = np.minimum(np.floor(x), n_cyc[:, None] - 1)
-    tau = x - j
-    shape = (np.clip(tau / fa[:, None], 0.0, 1.0)
-             - np.clip((tau - (fa + fc)[:, None]) / fb[:, None], 0.0, 1.0))
-    v = base[:, None] + np.take_along_axis(h, j.astype(np.intp), axis=1) * shape
+    # Sample the piecewise-linear trace on the grid: cycle index j and phase
+    # tau in [0, 1] of every sample (in-place ops: this is the hot path).
+    tau = np.arange(n_steps + 1, dtype=float)[None, :] * (n_cyc / n_steps)[:, None]
+    tau -= np.floor(tau)
+    # Unit cycle shape: ramp up over fa, flat over fc, ramp down over fb. It is 0 at
+    # tau = 0 and tau = 1, so a sample on a cycle boundary belongs to either cycle.
+    v = np.multiply(tau, (1.0 / fa)[:, None])
+    np.minimum(v, 1.0, out=v)
+    tau -= (1.0 - fb)[:, None]
+    tau *= (1.0 / fb)[:, None]
+    np.maximum(tau, 0.0, out=tau)
+    v -= tau
+    # Times each cycle's swing amplitude: cycle j holds samples k with
+    # floor(k n_cyc / N) = j (exact integers; the final sample closes the last cycle).
+    j = np.arange(max_c + 1, dtype=np.int64)[None, :]
+    first = np.where(j < n_cyc[:, None], (j * n_steps + n_cyc[:, None] - 1) // n_cyc[:, None],
+                     n_steps + 1)
+    v *= np.repeat(h.ravel(), np.diff(first, axis=1).ravel()).reshape(v.shape)
 
     # Sampling can cut a kink between samples; a constant offset restores the
     # exact distance without changing any acceleration.
-    dist = (v.sum(axis=1) - 0.5 * (v[:, 0] + v[:, -1])) * dt
-    v += ((d * 1000.0 - dist) / duration)[:, None]
-    np.maximum(v, 0.0, out=v)
+    swing_dist = (v.sum(axis=1) - 0.5 * (v[:, 0] + v[:, -1])) * dt
+    floor_mps = base + (d * 1000.0 - base * duration - swing_dist) / duration
+    v += floor_mps[:, None]
+    if np.any(floor_mps < 0.0):  # cannot happen with the caps above; kept as a guard
+        np.maximum(v, 0.0, out=v)
     return v, dt
 
 

@@ -26,7 +26,12 @@ __all__ = ["PROFILES", "DrivingProfile", "VehicleParams", "get_profile"]
 def _check_range(owner: str, name: str, value: float, lo: float, hi: float,
                  *, lo_open: bool = False, hi_open: bool = False) -> None:
     """Raise a ValueError naming the field, value and allowed range."""
-    ok = math.isfinite(value)
+    if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
+        value = value.item()  # numpy scalar -> Python number, for a plain message
+    try:
+        ok = not isinstance(value, bool) and math.isfinite(value)
+    except TypeError:
+        ok = False
     if ok:
         ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
     if not ok:
@@ -111,7 +116,10 @@ class VehicleParams:
         _check_range(o, "gravity_mps2", self.gravity_mps2, 0.0, 30.0)
         _check_range(o, "aux_base_kw", self.aux_base_kw, 0.0, 50.0)
         _check_range(o, "linear_drag_n_per_mps", self.linear_drag_n_per_mps, 0.0, 1000.0)
-        hv = tuple(float(x) for x in self.hvac_kw)
+        try:
+            hv = tuple(float(x) for x in self.hvac_kw)
+        except (TypeError, ValueError):
+            hv = ()
         if len(hv) != 4:
             raise ValueError(f"VehicleParams.hvac_kw={self.hvac_kw!r} must have 4 values "
                              "(T<0, 0<=T<15, 15<=T<=25, T>25 degC)")
@@ -243,7 +251,10 @@ class DrivingProfile:
         _check_range(o, "pke_mps2", self.pke_mps2, 0.0, 5.0)
         _check_range(o, "cycle_period_s", self.cycle_period_s, 0.0, 3600.0, lo_open=True)
         _check_range(o, "amplitude_cv", self.amplitude_cv, 0.0, 2.0)
-        pf = tuple(float(x) for x in self.phase_fractions)
+        try:
+            pf = tuple(float(x) for x in self.phase_fractions)
+        except (TypeError, ValueError):
+            pf = ()
         if len(pf) != 3 or any(not (0.0 < x < 1.0) for x in pf) or abs(sum(pf) - 1.0) > 1e-6:
             raise ValueError(f"{o}.phase_fractions={self.phase_fractions!r} must be three values "
                              "in (0, 1) (accel, cruise, brake) that sum to 1")

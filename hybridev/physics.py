@@ -65,6 +65,9 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
     """
     v = vehicle or VehicleParams()
     t = np.asarray(temperature_c, dtype=float)
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"temperature_c={temperature_c!r} contains NaN or infinite values; "
+                         "allowed range: finite degC")
     cold, cool, mild, hot = v.hvac_kw
     return np.where(t < 0.0, cold, np.where(t < 15.0, cool, np.where(t <= 25.0, mild, hot)))
 
@@ -97,42 +100,112 @@ def aux_power_kw(temperature_c, profile: ProfileLike = "normal",
 
 
 def _as_trace(speed_mps, dt_s) -> tuple[np.ndarray, np.ndarray]:
+    """Validated speed array and dt as a scalar or an (n_trips, 1) column."""
     v = np.asarray(speed_mps, dtype=float)
     if v.ndim not in (1, 2):
         raise ValueError(f"speed_mps must have shape (n_samples,) or (n_trips, n_samples); "
                          f"got shape {v.shape}")
     if v.shape[-1] < 2:
         raise ValueError(f"speed_mps needs at least 2 samples per trace; got {v.shape[-1]}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError("speed_mps contains NaN or infinite values")
-    if np.any(v < 0):
-        raise ValueError(f"speed_mps={v.min()!r} is negative; allowed range [0, 70] m/s")
+    if v.size == 0:
+        raise ValueError("speed_mps is empty: at least one trace is required")
+    lo, hi = float(v.min()), float(v.max())  # NaN propagates through min
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ValueError("speed_mps contains NaN or infinite values; allowed range [0, inf) m/s")
+    if lo < 0:
+        raise ValueError(f"speed_mps={lo!r} is negative; allowed range [0, inf) m/s")
     dt = np.asarray(dt_s, dtype=float)
     if not np.all(np.isfinite(dt)) or np.any(dt <= 0):
-        raise ValueError(f"dt_s={dt_s!r} must be finite and > 0 seconds")
+        raise ValueError(f"dt_s={dt_s!r} is outside the allowed range (0, inf) seconds")
     if v.ndim == 1 and dt.ndim > 0:
         raise ValueError("dt_s must be a scalar for a single (1-D) speed trace")
     if dt.ndim > 0:
+        if dt.ndim != 1 or dt.shape[0] != v.shape[0]:
+            raise ValueError(f"dt_s must be a scalar or have shape ({v.shape[0]},) "
+                             f"(one per trip); got shape {dt.shape}")
         dt = dt.reshape(-1, 1)
     return v, dt
 
 
-def _per_trip(x, v: np.ndarray) -> np.ndarray:
+def _per_trip(x, v: np.ndarray, name: str = "value") -> np.ndarray:
     """Reshape a scalar/(n_trips,) quantity to broadcast against (n_trips, n_intervals)."""
     x = np.asarray(x, dtype=float)
-    if x.ndim == 0 or v.ndim == 1:
+    if x.ndim == 0:
         return x
+    if v.ndim == 1 or x.shape != (v.shape[0],):
+        want = "a scalar" if v.ndim == 1 else f"a scalar or shape ({v.shape[0]},)"
+        raise ValueError(f"{name} must be {want}; got shape {x.shape}")
     return x.reshape(-1, 1)
 
 
+_MAX_GRADE_RAD = float(np.pi / 4)
+
+
 def _interval_grade(grade_rad, v: np.ndarray) -> np.ndarray:
+    """Grade per interval (mean of its end samples); (n_trips, 1) columns stay columns."""
     g = np.asarray(grade_rad, dtype=float)
+    if g.size and not (np.all(np.isfinite(g)) and np.all(np.abs(g) <= _MAX_GRADE_RAD)):
+        bad = g[~(np.isfinite(g) & (np.abs(g) <= _MAX_GRADE_RAD))].ravel()[0]
+        raise ValueError(f"grade_rad={float(bad)!r} is outside the allowed range "
+                         f"[-{_MAX_GRADE_RAD:.4f}, {_MAX_GRADE_RAD:.4f}] rad")
     if g.ndim == 0:
         return g
-    if not np.all(np.isfinite(g)):
-        raise ValueError("grade_rad contains NaN or infinite values")
+    try:
+        np.broadcast_shapes(g.shape, v.shape)
+    except ValueError:
+        raise ValueError(f"grade_rad of shape {g.shape} does not broadcast to the speed trace "
+                         f"shape {v.shape}") from None
+    if g.shape[-1] == 1:  # constant along the trace
+        return g
     g = np.broadcast_to(g, v.shape)
     return 0.5 * (g[..., 1:] + g[..., :-1])
+
+
+def _wheel_power_w(v: np.ndarray, dt, veh: VehicleParams, th) -> np.ndarray:
+    """Wheel power in W per interval; no validation (hot path, in-place ops).
+
+    ``dt`` is a scalar or an ``(n_trips, 1)`` column, ``th`` the interval grade.
+    Uses ``(F_const + b v + k v^2 + m a) v`` with interval-mean speed ``v`` and
+    forward-difference acceleration ``a``.
+    """
+    m, g = veh.mass_kg, veh.gravity_mps2
+    vm = np.add(v[..., 1:], v[..., :-1])
+    vm *= 0.5
+    p = vm * (0.5 * veh.air_density_kg_m3 * veh.drag_area_m2)
+    if veh.linear_drag_n_per_mps:
+        p += veh.linear_drag_n_per_mps
+    p *= vm
+    p += (veh.rolling_resistance_coef * m * g) * np.cos(th) + (m * g) * np.sin(th)
+    acc = np.subtract(v[..., 1:], v[..., :-1])
+    acc *= m / dt
+    p += acc
+    p *= vm
+    return p
+
+
+def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> np.ndarray:
+    """Net battery energy (kWh) per trace from wheel power in W; overwrites ``pw_w``.
+
+    ``sum(mult/eta_d * max(P_w, 0) + eta_r * min(P_w, 0) + P_aux) * dt``,
+    computed from two sums so that no battery-power array is formed. Per-trip
+    inputs are scalars or ``(n_trips, 1)`` columns; returns shape ``()`` or
+    ``(n_trips,)``.
+    """
+    total = pw_w.sum(axis=-1, keepdims=True)
+    pos = np.maximum(pw_w, 0.0, out=pw_w).sum(axis=-1, keepdims=True)
+    wheel_kw = (mult_over_eta * pos + eta_r * (total - pos)) * 1e-3
+    return ((wheel_kw + aux_kw * pw_w.shape[-1]) * (dt / 3600.0))[..., 0]
+
+
+def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
+                   v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column."""
+    n_trips = v.shape[0] if v.ndim == 2 else None
+    mult, eta_r, mode_kw = _profile_values(profile, n_trips)
+    t = _per_trip(temperature_c, v, "temperature_c")
+    aux = veh.aux_base_kw + hvac_power_kw(t, veh) + _per_trip(mode_kw, v, "profile")
+    return (_per_trip(mult, v, "profile") / veh.drivetrain_efficiency,
+            _per_trip(eta_r, v, "profile"), aux)
 
 
 def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -163,15 +236,9 @@ def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     """
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
-    vm = 0.5 * (v[..., 1:] + v[..., :-1])
-    acc = np.diff(v, axis=-1) / dt
-    th = _interval_grade(grade_rad, v)
-    m, g = veh.mass_kg, veh.gravity_mps2
-    force = (veh.rolling_resistance_coef * m * g) * np.cos(th) + m * g * np.sin(th)
-    force = force + vm * (veh.linear_drag_n_per_mps
-                          + (0.5 * veh.air_density_kg_m3 * veh.drag_area_m2) * vm)
-    force = force + m * acc
-    return force * vm * 1e-3
+    p = _wheel_power_w(v, dt, veh, _interval_grade(grade_rad, v))
+    p *= 1e-3
+    return p
 
 
 def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -201,15 +268,17 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     True
     """
     veh = vehicle or VehicleParams()
-    pw = wheel_power_kw(speed_mps, dt_s, vehicle=veh, grade_rad=grade_rad)
-    n_trips = pw.shape[0] if pw.ndim == 2 else None
-    mult, eta_r, mode_kw = _profile_values(profile, n_trips)
-    aux = veh.aux_base_kw + hvac_power_kw(temperature_c, veh) + mode_kw
-    if pw.ndim == 1 and np.ndim(aux) > 0:
-        raise ValueError("temperature_c and profile must be scalars for a single speed trace")
-    traction = np.maximum(pw, 0.0) * _per_trip(mult / veh.drivetrain_efficiency, pw)
-    regen = np.minimum(pw, 0.0) * _per_trip(eta_r, pw)  # <= 0
-    return traction + regen + _per_trip(aux, pw)
+    v, dt = _as_trace(speed_mps, dt_s)
+    th = _interval_grade(grade_rad, v)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
+    pw = _wheel_power_w(v, dt, veh, th)
+    pw *= 1e-3
+    out = np.maximum(pw, 0.0) * mult_eta
+    np.minimum(pw, 0.0, out=pw)
+    pw *= eta_r  # regeneration, <= 0
+    out += pw
+    out += aux
+    return out
 
 
 def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -244,10 +313,11 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     >>> round(float(e), 2)   # 9.70 kW / 0.9 + 1.5 kW aux, for 1 h
     12.27
     """
-    p = trace_power_kw(speed_mps, dt_s, vehicle=vehicle, profile=profile,
-                       temperature_c=temperature_c, grade_rad=grade_rad)
-    _, dt = _as_trace(speed_mps, dt_s)
-    return p.sum(axis=-1) * (dt[..., 0] if np.ndim(dt) else dt) / 3600.0
+    veh = vehicle or VehicleParams()
+    v, dt = _as_trace(speed_mps, dt_s)
+    th = _interval_grade(grade_rad, v)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
+    return _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
 
 
 def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | None = None,
@@ -281,8 +351,10 @@ def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | Non
         raise ValueError(f"soc_initial={soc_initial!r} is outside the allowed range [0, 1]")
     p = trace_power_kw(speed_mps, dt_s, vehicle=veh, profile=profile,
                        temperature_c=temperature_c, grade_rad=grade_rad)
-    _, dt = _as_trace(speed_mps, dt_s)
-    used = np.cumsum(p * dt, axis=-1) / (3600.0 * veh.battery_capacity_kwh)
-    s0b = _per_trip(s0, p)
+    dt = np.asarray(dt_s, dtype=float)  # validated by trace_power_kw
+    dt = dt.reshape(-1, 1) if dt.ndim else dt
+    s0b = _per_trip(s0, p, "soc_initial")
+    used = np.cumsum(p, axis=-1)
+    used *= dt / (3600.0 * veh.battery_capacity_kwh)
     soc = np.concatenate([np.broadcast_to(s0b, (*p.shape[:-1], 1)), s0b - used], axis=-1)
-    return np.clip(soc, 0.0, 1.0)
+    return np.clip(soc, 0.0, 1.0, out=soc)

@@ -28,15 +28,28 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .kinematics import synthesize_speed_trace
+from .kinematics import _check_steps, profile_table, synthesize_speed_trace
 from .params import PROFILES, VehicleParams
-from .physics import soc_trajectory, trace_power_kw
+from .physics import (
+    _battery_energy_kwh,
+    _interval_grade,
+    _wheel_power_w,
+    hvac_power_kw,
+    soc_trajectory,
+    trace_power_kw,
+)
 from .validation import validate_trips
 
 __all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces"]
 
-BLOCK_TRIPS = 1024
-"""Trips simulated per block (bounds memory; results do not depend on it)."""
+BLOCK_TRIPS = 128
+"""Most trips simulated per block (bounds memory and keeps the working arrays
+in the CPU cache; results do not depend on it)."""
+
+_BLOCK_SAMPLES = 1 << 17
+"""Most speed samples per block; long traces get fewer trips per block."""
+
+_MAX_TRIPS = 10_000_000
 
 PAPER_SPEEDS_KMH = (40.0, 60.0, 80.0, 100.0, 120.0)
 PAPER_TEMPERATURES_C = (20.0, -5.0, 32.0)
@@ -68,9 +81,14 @@ def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> p
     >>> sorted(t["mode"].value_counts().to_dict().items())
     [('aggressive', 2), ('eco', 2), ('normal', 2)]
     """
+    try:
+        ok = not isinstance(n_trips, bool) and float(n_trips) == int(n_trips)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or not 1 <= int(n_trips) <= _MAX_TRIPS:
+        raise ValueError(f"n_trips={n_trips!r} is outside the allowed range: an integer in "
+                         f"[1, {_MAX_TRIPS}]")
     n = int(n_trips)
-    if n < 1:
-        raise ValueError(f"n_trips={n_trips!r} is outside the allowed range [1, inf)")
     rng = np.random.default_rng(seed)
     modes = np.array(list(PROFILES))
     return pd.DataFrame({
@@ -84,8 +102,15 @@ def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> p
     })
 
 
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise ValueError(f"seed={seed!r} must be an integer")
+    return int(seed)
+
+
 def _blocks(trips: pd.DataFrame, n_steps: int, seed: int
             ) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray | float]]:
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
     d = trips["distance_km"].to_numpy(float)
     s = trips["avg_speed_kmh"].to_numpy(float)
     modes = trips["mode"].to_numpy(object)
@@ -93,8 +118,9 @@ def _blocks(trips: pd.DataFrame, n_steps: int, seed: int
              if "grade_pct" in trips.columns else None)
     keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns
             else np.arange(len(trips)))
-    for start in range(0, len(trips), BLOCK_TRIPS):
-        sl = slice(start, start + BLOCK_TRIPS)
+    step = max(1, min(BLOCK_TRIPS, _BLOCK_SAMPLES // (int(n_steps) + 1)))
+    for start in range(0, len(trips), step):
+        sl = slice(start, start + step)
         v, dt = synthesize_speed_trace(d[sl], s[sl], modes[sl], n_steps=n_steps, seed=seed,
                                        trip_keys=keys[sl])
         yield sl, v, dt, (0.0 if grade is None else grade[sl, None])
@@ -128,7 +154,8 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
     -------
     pandas.DataFrame
         A copy of ``trips`` with ``energy_kwh_physics`` (kWh),
-        ``soc_final_physics`` (``max(0, s0 - E/C)``), ``max_speed_kmh`` (km/h)
+        ``soc_final_physics`` (``s0 - E/C`` clipped to [0, 1]: an
+        empty battery delivers nothing, a full one stores nothing), ``max_speed_kmh`` (km/h)
         and ``kwh_per_km_physics`` (kWh/km) added.
 
     Examples
@@ -137,24 +164,29 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
     >>> bool(((out.soc_final_physics >= 0) & (out.soc_final_physics <= 1)).all())
     True
     """
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
     t = validate_trips(trips)
     veh = vehicle or VehicleParams()
     n = len(t)
     energy = np.empty(n)
     vmax = np.empty(n)
-    modes = t["mode"].to_numpy(object)
-    temp = t["temperature_c"].to_numpy(float)
+    prof = profile_table(t["mode"].to_numpy(object), n,
+                         ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
+    mult_eta = (prof["efficiency_multiplier"] / veh.drivetrain_efficiency)[:, None]
+    eta_r = prof["regen_efficiency"][:, None]
+    aux = (veh.aux_base_kw + hvac_power_kw(t["temperature_c"].to_numpy(float), veh)
+           + prof["aux_kw"])[:, None]
     for sl, v, dt, grade in _blocks(t, n_steps, seed):
-        p = trace_power_kw(v, dt, vehicle=veh, profile=modes[sl], temperature_c=temp[sl],
-                           grade_rad=grade)
-        energy[sl] = p.sum(axis=1) * dt / 3600.0
+        # Same model as trace_energy_kwh, minus the re-validation of our own traces.
+        pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
+        energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
         vmax[sl] = v.max(axis=1) * 3.6
         if progress is not None:
             progress(min(sl.stop, n))
     out = t.copy()
     out["energy_kwh_physics"] = energy
-    out["soc_final_physics"] = np.maximum(
-        0.0, t["soc_initial"].to_numpy(float) - energy / veh.battery_capacity_kwh)
+    out["soc_final_physics"] = np.clip(
+        t["soc_initial"].to_numpy(float) - energy / veh.battery_capacity_kwh, 0.0, 1.0)
     out["max_speed_kmh"] = vmax
     out["kwh_per_km_physics"] = energy / t["distance_km"].to_numpy(float)
     return out
@@ -192,6 +224,7 @@ def trip_traces(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     >>> tr.speed_mps.shape, tr.power_kw.shape
     ((2, 101), (2, 100))
     """
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
     t = validate_trips(trips)
     veh = vehicle or VehicleParams()
     modes = t["mode"].to_numpy(object)
