@@ -8,5 +8,8 @@ message.
 
 COMMAND_MODULES = (
     "hybridev.commands.simulate",
+    "hybridev.commands.fit",
+    "hybridev.commands.predict",
+    "hybridev.commands.plan_charging",
 )
 """Modules registered as subcommands, in help order."""
