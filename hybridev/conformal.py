@@ -10,6 +10,11 @@ regression", Sec. 5.2; Angelopoulos & Bates 2023, Sec. 2.3). Because the score
 is normalised, intervals stay adaptive: wide where the model says it is
 unsure, narrow elsewhere.
 
+One-sided bounds use the signed scores ``(y_i - mu_i) / s_i``:
+:meth:`NormalizedConformal.lower_bound` gives ``mu - q' s`` with
+``P(y >= mu - q' s) >= level``. They serve trips whose battery may run empty,
+where final SoC has a point mass at 0 (see :meth:`hybridev.HybridModel.predict_interval`).
+
 ``spread_factor(level) = q / z_{(1 + level)/2}`` is the same correction
 expressed as a multiplier on the predictive spread, for consumers that need a
 whole distribution (joint sampling for charging plans, range bands).
@@ -32,9 +37,9 @@ class NormalizedConformal:
 
     Parameters
     ----------
-    scores : numpy.ndarray, shape (n_cal,)
-        Conformity scores ``|y - mu| / s`` on the calibration split,
-        dimensionless.
+    residuals : numpy.ndarray, shape (n_cal,)
+        Signed normalised residuals ``(y - mu) / s`` on the calibration split,
+        dimensionless; the two-sided conformity scores are their absolute values.
 
     Examples
     --------
@@ -45,13 +50,15 @@ class NormalizedConformal:
     True
     """
 
-    scores: np.ndarray
+    residuals: np.ndarray
 
     def __post_init__(self) -> None:
-        s = np.sort(np.asarray(self.scores, dtype=float).ravel())
-        if s.size == 0 or not np.all(np.isfinite(s)) or s[0] < 0:
-            raise ValueError("conformal scores must be a non-empty array of finite values >= 0")
-        object.__setattr__(self, "scores", s)
+        r = np.asarray(self.residuals, dtype=float).ravel()
+        if r.size == 0 or not np.all(np.isfinite(r)):
+            raise ValueError("conformal residuals must be a non-empty array of finite values")
+        object.__setattr__(self, "residuals", r)
+        object.__setattr__(self, "_abs", np.sort(np.abs(r)))
+        object.__setattr__(self, "_low", np.sort(-r))  # scores of the lower one-sided bound
 
     @classmethod
     def fit(cls, y_true, mean, std) -> NormalizedConformal:
@@ -71,23 +78,31 @@ class NormalizedConformal:
                              f"{y.shape}, {mu.shape}, {sd.shape}")
         if not np.all(np.isfinite(sd)) or np.any(sd <= 0):
             raise ValueError("std must be finite and > 0 for every calibration trip")
-        return cls(np.abs(y - mu) / sd)
+        return cls((y - mu) / sd)
 
     @property
     def n_calibration(self) -> int:
         """Number of calibration points."""
-        return int(self.scores.size)
+        return int(self.residuals.size)
+
+    def _order_stat(self, sorted_scores: np.ndarray, level: float) -> float:
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
+        k = math.ceil((self.n_calibration + 1) * level)
+        return math.inf if k > self.n_calibration else float(sorted_scores[k - 1])
 
     def quantile(self, level: float) -> float:
-        """Conformal quantile ``q`` of the scores for confidence ``level``.
+        """Conformal quantile ``q`` of the two-sided scores ``|r|`` for confidence ``level``.
 
         Returns ``inf`` when the calibration split is too small for the level
         (``ceil((n + 1) level) > n``).
         """
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
-        k = math.ceil((self.n_calibration + 1) * level)
-        return math.inf if k > self.n_calibration else float(self.scores[k - 1])
+        return self._order_stat(self._abs, level)
+
+    def lower_bound(self, mean, std, level: float) -> np.ndarray:
+        """One-sided conformal lower bound ``mean - q' std`` with coverage >= ``level``."""
+        q = self._order_stat(self._low, level)
+        return np.asarray(mean, float) - q * np.asarray(std, float)
 
     def spread_factor(self, level: float) -> float:
         """Multiplier on a Gaussian predictive spread matching ``quantile(level)``."""

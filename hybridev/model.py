@@ -37,6 +37,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
+from .conformal import NormalizedConformal
 from .features import (
     FEATURE_NAMES,
     check_feature_names,
@@ -47,9 +48,10 @@ from .features import (
 )
 from .measured import validate_measured_trips
 from .nn import train_ensemble
-from .params import VehicleParams
+from .params import PROFILES, VehicleParams
 from .persist import load_model, save_model
 from .trips import simulate
+from .uncertainty import ProbabilisticMixin
 from .validation import TRIP_RULES, check_table
 
 __all__ = [
@@ -100,7 +102,7 @@ def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = Fals
                          f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}")
 
 
-class HybridModel(BaseEstimator):
+class HybridModel(ProbabilisticMixin, BaseEstimator):
     """Hybrid physics + residual-network predictor of trip energy and final SoC.
 
     Parameters
@@ -111,9 +113,11 @@ class HybridModel(BaseEstimator):
         Network inputs, a subset of :data:`hybridev.features.FEATURE_NAMES`
         (default: all 11; subsets are for ablations).
     n_members : int
-        Ensemble size (1 = the paper's single network).
+        Ensemble size (default 5, the deep ensemble; 1 = the paper's single
+        network).
     heteroscedastic : bool
-        Give each member a variance output, trained by Gaussian NLL.
+        Give each member a variance output, trained by Gaussian NLL (default
+        True; False + ``n_members=1`` is the paper's MSE network).
     hidden : tuple of int
         Hidden-layer widths.
     dropout : float
@@ -131,6 +135,21 @@ class HybridModel(BaseEstimator):
         Intervals per synthesised speed trace of the physics model.
     physics_seed : int
         Seed of the physics speed traces (see :func:`hybridev.simulate`).
+    calibrate_physics : bool
+        Sample a posterior over the physics parameters with emcee
+        (:func:`hybridev.calibrate.calibrate_physics`) before training the
+        network; ``energy_kwh_physics`` is then the calibrated physics
+        (posterior median). Default True.
+    n_posterior_draws : int
+        Posterior draws per prediction (physics-parameter uncertainty).
+    conformal_fraction : float
+        Share of the measured trips held out of all fitting for the
+        split-conformal calibration of intervals, in [0, 1); 0 leaves the
+        intervals uncalibrated.
+    missing_mode : str
+        Physics of trips without ``mode`` in the calibration: ``"infer"``
+        (mixture over the profiles with sampled weights), ``"marginalize"``
+        (equal weights) or a mode name.
 
     Attributes
     ----------
@@ -150,6 +169,10 @@ class HybridModel(BaseEstimator):
         ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
     fit_info_ : dict
         Trip counts, seed, fit time and validation-set errors.
+    posterior_ : PhysicsPosterior or None
+        Physics posterior (``calibrate_physics=True``).
+    conformal_ : NormalizedConformal or None
+        Calibration residuals of the conformal step (``conformal_fraction > 0``).
 
     Examples
     --------
@@ -167,13 +190,15 @@ class HybridModel(BaseEstimator):
     _default_features = FEATURE_NAMES
 
     def __init__(self, vehicle: VehicleParams | None = None, *,
-                 features: Sequence[str] | None = None, n_members: int = 1,
-                 heteroscedastic: bool = False, hidden: tuple[int, ...] = (64, 32, 16),
+                 features: Sequence[str] | None = None, n_members: int = 5,
+                 heteroscedastic: bool = True, hidden: tuple[int, ...] = (64, 32, 16),
                  dropout: float = 0.2, max_epochs: int = 200, patience: int = 20,
                  batch_size: int = 32, learning_rate: float = 1e-3, lr_decay: float = 0.95,
                  lr_decay_every: int = 50, weight_decay: float = 1e-4,
                  val_fraction: float = VAL_FRACTION, n_steps: int = 1000,
-                 physics_seed: int = 0) -> None:
+                 physics_seed: int = 0, calibrate_physics: bool = True,
+                 n_posterior_draws: int = 200, conformal_fraction: float = 0.15,
+                 missing_mode: str = "infer") -> None:
         self.vehicle = vehicle
         self.features = features
         self.n_members = n_members
@@ -190,6 +215,10 @@ class HybridModel(BaseEstimator):
         self.val_fraction = val_fraction
         self.n_steps = n_steps
         self.physics_seed = physics_seed
+        self.calibrate_physics = calibrate_physics
+        self.n_posterior_draws = n_posterior_draws
+        self.conformal_fraction = conformal_fraction
+        self.missing_mode = missing_mode
 
     # -- configuration -------------------------------------------------------------------
     def _vehicle(self) -> VehicleParams:
@@ -227,6 +256,13 @@ class HybridModel(BaseEstimator):
         _check_range(f"{o}.val_fraction", self.val_fraction, 0.0, 1.0, hi_open=True)
         _check_range(f"{o}.n_steps", self.n_steps, 8, 1_000_000, integer=True)
         _check_range(f"{o}.physics_seed", self.physics_seed, 0, 2**63 - 1, integer=True)
+        if not isinstance(self.calibrate_physics, bool | np.bool_):
+            raise ValueError(f"{o}.calibrate_physics={self.calibrate_physics!r} must be a bool")
+        _check_range(f"{o}.n_posterior_draws", self.n_posterior_draws, 1, 100_000, integer=True)
+        _check_range(f"{o}.conformal_fraction", self.conformal_fraction, 0.0, 0.9)
+        allowed = ("infer", "marginalize", *PROFILES)
+        if self.missing_mode not in allowed:
+            raise ValueError(f"{o}.missing_mode={self.missing_mode!r}; allowed: {list(allowed)}")
 
     def __sklearn_is_fitted__(self) -> bool:
         return hasattr(self, "net_")
@@ -246,11 +282,19 @@ class HybridModel(BaseEstimator):
         """
         if not isinstance(trips, pd.DataFrame):
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
+        if getattr(self, "posterior_", None) is not None:
+            return self._posterior_physics(self._validated(trips), 0, 0)[0]
         modes = normalize_modes(trips.get("mode"), len(trips))
         out = simulate(trips.assign(mode=physics_modes(modes)), self._vehicle(),
                        n_steps=int(self.n_steps), seed=int(self.physics_seed))
         out["mode"] = modes  # simulate raises on any bad row, so rows are unchanged
         return out
+
+    def _validated(self, trips: pd.DataFrame) -> pd.DataFrame:
+        """Validated prediction trips (``mode`` ``None`` where unknown)."""
+        if not isinstance(trips, pd.DataFrame):
+            raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
+        return validate_prediction_trips(trips)
 
     def _features(self, physics_table: pd.DataFrame) -> np.ndarray:
         """Standardised network inputs (n_trips, n_features), float32."""
@@ -319,22 +363,29 @@ class HybridModel(BaseEstimator):
         _check_range("seed", seed, 0, 2**63 - 1, integer=True)  # of fit
         t0 = time.perf_counter()
         good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
+        n = len(good)
+        split_ss, torch_ss = np.random.SeedSequence(int(seed)).spawn(2)
+        order = np.random.default_rng(split_ss).permutation(n)
+        n_cal = round(self.conformal_fraction * n) if self.conformal_fraction > 0 else 0
+        rest = n - n_cal
+        n_val = max(round(self.val_fraction * rest), 1) if self.val_fraction > 0 else 0
+        if rest - n_val < 1 or (self.conformal_fraction > 0 and n_cal < 1):
+            raise ValueError(f"measured trips: {n} valid row(s) are too few to fit with "
+                             f"val_fraction={self.val_fraction!r} and conformal_fraction="
+                             f"{self.conformal_fraction!r}")
+        cal_idx = np.sort(order[:n_cal])
+        val_idx = np.sort(order[n_cal:n_cal + n_val])
+        tr_idx = np.sort(order[n_cal + n_val:])
+        for attr in ("posterior_", "conformal_"):
+            setattr(self, attr, None)
+        if self._residual:  # the calibration trips stay out of the physics posterior too
+            self._fit_posterior(good.iloc[np.sort(order[n_cal:])], seed)
         phys = self._physics(good)
         names = self._feature_names()
         x = trip_features(phys, names)
         e_meas = good["energy_kwh"].to_numpy(float)
         e_phys = phys["energy_kwh_physics"].to_numpy(float)
         y = e_meas - e_phys if self._residual else e_meas
-        n = len(good)
-        n_val = round(self.val_fraction * n) if self.val_fraction > 0 else 0
-        if self.val_fraction > 0:
-            n_val = max(n_val, 1)
-        if n - n_val < 1:
-            raise ValueError(f"measured trips: {n} valid row(s) are too few to fit with "
-                             f"val_fraction={self.val_fraction!r}; at least {n_val + 1} needed")
-        split_ss, torch_ss = np.random.SeedSequence(int(seed)).spawn(2)
-        order = np.random.default_rng(split_ss).permutation(n)
-        val_idx, tr_idx = np.sort(order[:n_val]), np.sort(order[n_val:])
         self.feature_names_ = names
         self.n_features_in_ = len(names)
         self.feature_mean_, self.feature_std_ = fit_standardizer(x[tr_idx])
@@ -355,7 +406,11 @@ class HybridModel(BaseEstimator):
         self.net_ = net
         self.history_ = hist
         self.n_parameters_ = net.n_parameters_per_member
-        info = {"n_trips": n, "n_train": n - n_val, "n_val": n_val, "seed": int(seed),
+        if n_cal:
+            _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed))
+            self.conformal_ = NormalizedConformal.fit(e_meas[cal_idx], dist.mean(), dist.std())
+        info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
+                "seed": int(seed),
                 "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
                 "n_parameters_per_member": self.n_parameters_}
         if n_val:
@@ -406,13 +461,6 @@ class HybridModel(BaseEstimator):
         return out
 
     # -- persistence ----------------------------------------------------------------------
-    def _extra_state(self) -> tuple[dict, dict[str, np.ndarray]]:
-        """JSON entries and arrays that extensions add to a saved model (none here)."""
-        return {}, {}
-
-    def _set_extra_state(self, doc: dict, arrays: dict[str, np.ndarray]) -> None:
-        """Restore what :meth:`_extra_state` saved (nothing here)."""
-
     def save(self, path: str | os.PathLike) -> None:
         """Save to a directory (JSON + ``.npz``, no pickle), atomically.
 

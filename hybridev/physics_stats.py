@@ -99,6 +99,8 @@ class PhysicsStats:
     n_trips : int
     vehicle : VehicleParams
         Vehicle that fixed the sign split; default values of the parameters.
+    max_speed_kmh : numpy.ndarray, shape (n_rows,), km/h, optional
+        Highest speed of each row's trace.
     """
 
     roll_pos: np.ndarray
@@ -118,6 +120,7 @@ class PhysicsStats:
     log_weight: np.ndarray
     n_trips: int
     vehicle: VehicleParams
+    max_speed_kmh: np.ndarray | None = None
 
     @property
     def n_rows(self) -> int:
@@ -150,7 +153,8 @@ class PhysicsStats:
         new[pos] = np.arange(pos.size)
         rows = new[self.trip] >= 0
         kw = {f.name: getattr(self, f.name)[rows] for f in dataclasses.fields(self)
-              if f.name not in ("n_trips", "vehicle", "trip")}
+              if f.name not in ("n_trips", "vehicle", "trip")
+              and getattr(self, f.name) is not None}
         return PhysicsStats(**kw, trip=new[self.trip[rows]], n_trips=int(pos.size),
                             vehicle=self.vehicle)
 
@@ -174,7 +178,7 @@ def _profile_consts(profile, n: int):
 
 
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
-              log_weight=None, n_trips=None) -> PhysicsStats:
+              log_weight=None, n_trips=None, max_speed_kmh=None) -> PhysicsStats:
     n = len(duration_s)
     mult, eta_r, mode_kw = _profile_consts(profile, n)
     hvac = np.broadcast_to(hvac_power_kw(temperature_c, veh), (n,))
@@ -185,7 +189,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         mode_kw=mode_kw,
         mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
         log_weight=np.zeros(n) if log_weight is None else log_weight,
-        n_trips=n if n_trips is None else n_trips, vehicle=veh)
+        n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -232,7 +236,8 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     sn = [np.where(pos, 0.0, c).sum(axis=1) for c in comps]
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
-    return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh)
+    return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
+                     max_speed_kmh=v.max(axis=1) * 3.6)
 
 
 def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
@@ -273,7 +278,9 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
                          if traces.temperature_c is not None else 20.0)
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
-    return _assemble(sp, sn, traces.duration_s(), t, prof, veh)
+    vmax = np.zeros(n)
+    np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
+    return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6)
 
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
@@ -339,6 +346,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
     duration = np.zeros(len(trip))
+    vmax = np.zeros(len(trip))
     rl = logged[trip]
     if rl.any():
         sl = stats_from_logs(traces.select(keys[logged].astype(object)), vehicle=veh,
@@ -347,6 +355,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         for name in sums:
             sums[name][rl] = getattr(sl, name)[src]
         duration[rl] = sl.duration_h[src] * 3600.0
+        vmax[rl] = sl.max_speed_kmh[src]
     if (~rl).any():
         cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
                 "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
@@ -361,9 +370,10 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
+            vmax[dest[blk]] = s.max_speed_kmh
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], list(modes), veh, trip=trip, log_weight=log_w,
-                    n_trips=n)
+                    n_trips=n, max_speed_kmh=vmax)
 
 
 def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:

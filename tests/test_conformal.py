@@ -52,3 +52,12 @@ def test_bad_inputs():
         NormalizedConformal.fit([1.0, 2.0], [0.0], [1.0, 1.0])
     with pytest.raises(ValueError, match="non-empty"):
         NormalizedConformal(np.array([]))
+
+
+def test_lower_bound_one_sided_coverage():
+    rng = np.random.default_rng(5)
+    y = rng.gamma(2.0, 1.0, 4000)  # skewed: one-sided and two-sided quantiles differ
+    cp = NormalizedConformal.fit(y[:2000], np.full(2000, 2.0), np.ones(2000))
+    lo = cp.lower_bound(np.full(2000, 2.0), np.ones(2000), 0.9)
+    se = np.sqrt(0.9 * 0.1 / 2000)
+    assert abs(np.mean(y[2000:] >= lo) - 0.9) < 4 * se + 0.01

@@ -1,0 +1,214 @@
+"""Predictive distributions and intervals of the hybrid model (the probabilistic layer).
+
+The user's design, beyond the paper: an emcee posterior over the physics
+parameters (:func:`hybridev.calibrate.calibrate_physics`) combined with a deep
+ensemble of residual networks with mean and variance heads
+(:mod:`hybridev.nn`), made to cover by a split-conformal step
+(:mod:`hybridev.conformal`).
+
+For a trip with features ``x``, posterior draws ``theta_d`` (d = 1..D) and
+members ``m`` (m = 1..M):
+
+``E = E_p(theta_d) - mean_d E_p(theta_d) + E_p(theta_hat) + dE_m(x) + sigma_m(x) z``,
+
+where ``theta_hat`` is the posterior median (the physics the network was
+trained against). :class:`hybridev.predictive.EnergyDistribution` holds the
+pieces; its mean is the point prediction ``energy_kwh_pred``.
+
+Intervals (:meth:`ProbabilisticMixin.predict_interval`) are normalised split-
+conformal intervals ``mu +- q_level * s`` of energy, with ``mu`` and ``s`` the
+mean and standard deviation of that distribution and ``q_level`` from
+calibration trips held out of every other fitting step. Final SoC
+``max(0, s0 - E / C)`` is monotone in energy, so the SoC interval is the image
+of the energy interval, except for trips that may empty the battery (energy
+upper bound at or above ``s0 C``): their SoC has a point mass at 0, a central
+interval would over-cover, and the interval is the one-sided
+``[0, s0 - E_lo' / C]`` with the one-sided conformal lower energy bound
+``E_lo'`` at the same level.
+
+``confidence`` is the predictive standard deviation ``s`` of the trip energy
+in kWh (aleatoric noise of the members, their disagreement, and the physics
+posterior spread): higher means less sure. The conformal factor multiplies all
+trips alike, so it does not change the ranking and is not applied.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .calibrate import calibrate_physics
+from .conformal import NormalizedConformal
+from .physics_posterior import PhysicsPosterior
+from .physics_stats import energy_from_stats
+from .predictive import EnergyDistribution, soc_from_energy
+
+__all__ = ["ProbabilisticMixin"]
+
+
+class ProbabilisticMixin:
+    """Physics posterior, predictive distributions and conformal intervals for HybridModel."""
+
+    # -- physics -----------------------------------------------------------------------
+    def _posterior_physics(self, trips: pd.DataFrame, n_draws: int, seed: int
+                           ) -> tuple[pd.DataFrame, np.ndarray]:
+        """Simulate-like table at the posterior median, and (n_draws, n_trips) energies."""
+        post: PhysicsPosterior = self.posterior_
+        stats = post.stats_for(trips)
+        med = np.array([post.median()[n] for n in post.param_names])
+        e_med = energy_from_stats(stats, post.as_params(med[None, :]))[0]
+        draws = post.sample(n_draws, np.random.default_rng(seed)) if n_draws else med[None, :]
+        e_draws = energy_from_stats(stats, post.as_params(draws))
+        vmax = stats.max_speed_kmh
+        if stats.marginalised:
+            starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
+            vmax = np.maximum.reduceat(vmax, starts)
+        out = trips.copy()
+        cap = self._vehicle().battery_capacity_kwh
+        out["energy_kwh_physics"] = e_med
+        out["soc_final_physics"] = np.clip(out["soc_initial"].to_numpy(float) - e_med / cap,
+                                           0.0, 1.0)
+        out["max_speed_kmh"] = vmax
+        out["kwh_per_km_physics"] = e_med / out["distance_km"].to_numpy(float)
+        return out, e_draws
+
+    def _fit_posterior(self, measured: pd.DataFrame, seed: int) -> None:
+        if not self.calibrate_physics or not self._residual:
+            return
+        mode = self.missing_mode
+        if mode == "infer" and measured["mode"].notna().all():
+            mode = "marginalize"  # nothing to infer from: every trip is labelled
+        self.posterior_ = calibrate_physics(
+            measured, self._vehicle(), seed=int(seed), missing_mode=mode,
+            trace_steps=int(self.n_steps), trace_seed=int(self.physics_seed))
+
+    # -- distribution ------------------------------------------------------------------
+    def _distribution(self, trips: pd.DataFrame, *, seed: int = 0
+                      ) -> tuple[pd.DataFrame, EnergyDistribution]:
+        """Physics table and the raw (spread factor 1) predictive distribution."""
+        self._require_fitted()
+        if getattr(self, "posterior_", None) is not None:
+            table, draws = self._posterior_physics(self._validated(trips),
+                                                   int(self.n_posterior_draws), seed)
+        else:
+            table = self._physics(trips)
+            draws = table["energy_kwh_physics"].to_numpy(float)[None, :]
+        e_p = table["energy_kwh_physics"].to_numpy(float)
+        mean, var = self._residual_moments(self._features(table))
+        std = np.zeros_like(mean) if var is None else np.sqrt(var)
+        centred = draws - draws.mean(axis=0) + e_p
+        if not self._residual:  # PureML: no physics part
+            centred = np.zeros_like(centred)
+        return table, EnergyDistribution(centred, mean, std)
+
+    def predict_distribution(self, trips: pd.DataFrame, *, level: float = 0.9,
+                             seed: int = 0) -> EnergyDistribution:
+        """Predictive distribution of the trips' energies (joint across trips).
+
+        Parameters
+        ----------
+        trips : pandas.DataFrame
+            Trip table (``mode`` may be missing).
+        level : float
+            Confidence level whose conformal correction sets the spread
+            factor (see :meth:`hybridev.conformal.NormalizedConformal.spread_factor`).
+        seed : int
+            Seeds the choice of posterior draws.
+
+        Returns
+        -------
+        EnergyDistribution
+            With ``n_trips`` in the row order of ``trips``.
+        """
+        _, dist = self._distribution(trips, seed=seed)
+        cp = getattr(self, "conformal_", None)
+        if cp is None:
+            return dist
+        factor = cp.spread_factor(level)
+        if not np.isfinite(factor):
+            raise ValueError(f"level={level!r} is too high for {cp.n_calibration} "
+                             "calibration trips")
+        return EnergyDistribution(dist.physics_draws_kwh, dist.residual_mean_kwh,
+                                  dist.residual_std_kwh, spread_factor=max(factor, 1e-6))
+
+    def predict_interval(self, trips: pd.DataFrame, level: float = 0.9, *,
+                         seed: int = 0) -> pd.DataFrame:
+        """Predict energy and final SoC with intervals at confidence ``level``.
+
+        Parameters
+        ----------
+        trips : pandas.DataFrame
+            Trip table (``mode`` may be missing).
+        level : float
+            Confidence level in (0, 1), e.g. 0.9 for a 90 % interval.
+        seed : int
+            Seeds the choice of posterior draws.
+
+        Returns
+        -------
+        pandas.DataFrame
+            A copy of ``trips`` with the physics columns plus
+            ``energy_kwh_pred``, ``energy_kwh_lo``, ``energy_kwh_hi`` (kWh),
+            ``soc_final_pred``, ``soc_final_lo``, ``soc_final_hi`` and
+            ``confidence`` (kWh, the predictive standard deviation; higher
+            means less sure). See the module docstring for the construction.
+        """
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
+        table, dist = self._distribution(trips, seed=seed)
+        mu, sd = dist.mean(), dist.std()
+        e_p = table["energy_kwh_physics"].to_numpy(float)
+        floor = np.minimum(e_p, 0.0)
+        cp = getattr(self, "conformal_", None)
+        if cp is not None:
+            lo, hi = cp.interval(mu, sd, level)
+            lo_one = cp.lower_bound(mu, sd, level)
+        else:
+            lo, hi = dist.interval(level)
+            lo_one = dist.quantile(1.0 - level)
+        point = np.maximum(mu, floor)
+        lo, hi, lo_one = (np.maximum(a, floor) for a in (lo, hi, lo_one))
+        cap = self._vehicle().battery_capacity_kwh
+        s0 = table["soc_initial"].to_numpy(float)
+        may_empty = hi >= s0 * cap
+        out = table
+        out["energy_kwh_pred"] = point
+        out["energy_kwh_lo"] = lo
+        out["energy_kwh_hi"] = hi
+        out["soc_final_pred"] = soc_from_energy(s0, point, cap)
+        out["soc_final_lo"] = np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap))
+        out["soc_final_hi"] = soc_from_energy(s0, np.where(may_empty, lo_one, lo), cap)
+        out["confidence"] = sd
+        return out
+
+    @property
+    def capacity_kwh(self) -> float:
+        """Battery capacity of the model's vehicle, kWh."""
+        return float(self._vehicle().battery_capacity_kwh)
+
+    # -- persistence -------------------------------------------------------------------
+    def _extra_state(self) -> tuple[dict, dict[str, np.ndarray]]:
+        doc, arrays = {}, {}
+        post = getattr(self, "posterior_", None)
+        if post is not None:
+            d = post.to_dict()
+            doc["posterior"] = {"param_names": d["param_names"], "meta": d["meta"]}
+            arrays["posterior_samples"] = d["samples"]
+            arrays["posterior_noise_rel"] = d["noise_rel"]
+            if d["mode_weights"] is not None:
+                arrays["posterior_mode_weights"] = d["mode_weights"]
+        cp = getattr(self, "conformal_", None)
+        if cp is not None:
+            arrays["conformal_residuals"] = cp.residuals
+        return doc, arrays
+
+    def _set_extra_state(self, doc: dict, arrays: dict[str, np.ndarray]) -> None:
+        if "posterior" in doc:
+            p = doc["posterior"]
+            self.posterior_ = PhysicsPosterior.from_dict({
+                "param_names": p["param_names"], "meta": p["meta"],
+                "samples": arrays["posterior_samples"],
+                "noise_rel": arrays["posterior_noise_rel"],
+                "mode_weights": arrays.get("posterior_mode_weights")})
+        if "conformal_residuals" in arrays:
+            self.conformal_ = NormalizedConformal(arrays["conformal_residuals"])
