@@ -37,7 +37,9 @@ from .physics import (
 )
 from .physics_posterior import PhysicsPosterior
 from .physics_stats import PhysicsStats, energy_from_stats, trip_stats
+from .range import predict_range
 from .trips import TripTraces, make_trips, simulate, trip_traces
+from .truth import effect_breakdown, make_dataset, noise_floor_pct, oracle_energy_kwh
 from .validation import validate_trips
 
 __version__ = "0.1.0"
@@ -67,19 +69,24 @@ __all__ = [
     "coverage_table",
     "crps_gaussian",
     "crps_mixture",
+    "effect_breakdown",
     "energy_from_stats",
     "evaluate_charging",
     "get_profile",
     "hvac_power_kw",
     "mae",
+    "make_dataset",
     "make_trips",
     "mape",
     "miscalibration_area",
     "mixture_interval",
     "mixture_quantile",
+    "noise_floor_pct",
+    "oracle_energy_kwh",
     "plan_charging",
     "plan_charging_from_distribution",
     "positive_kinetic_energy",
+    "predict_range",
     "read_measured_trips",
     "reliability_curve",
     "rmse",

@@ -223,7 +223,8 @@ class PureML(HybridModel):
     --------
     >>> from hybridev import make_trips
     >>> t = make_trips(40, seed=0).assign(energy_kwh=lambda d: 0.18 * d.distance_km)
-    >>> m = PureML(max_epochs=2, n_steps=100).fit(t)
+    >>> m = PureML(n_members=1, heteroscedastic=False, conformal_fraction=0.0,
+    ...            max_epochs=2, n_steps=100).fit(t)  # the paper's network
     >>> m.n_features_in_, m.n_parameters_
     (9, 3265)
     """

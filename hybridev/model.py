@@ -50,6 +50,7 @@ from .measured import validate_measured_trips
 from .nn import train_ensemble
 from .params import PROFILES, VehicleParams
 from .persist import load_model, save_model
+from .predictive import soc_from_energy
 from .trips import simulate
 from .uncertainty import ProbabilisticMixin
 from .validation import TRIP_RULES, check_table
@@ -179,10 +180,15 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
     >>> from hybridev import make_trips, simulate
     >>> t = simulate(make_trips(40, seed=0), n_steps=100)
     >>> t["energy_kwh"] = t["energy_kwh_physics"] * 1.1
-    >>> m = HybridModel(max_epochs=3, n_steps=100).fit(t, seed=0)
+    >>> paper = dict(n_members=1, heteroscedastic=False, calibrate_physics=False,
+    ...              conformal_fraction=0.0)  # the paper's point model
+    >>> m = HybridModel(**paper, max_epochs=3, n_steps=100).fit(t, seed=0)
     >>> out = m.predict(t.drop(columns=["energy_kwh"]))
     >>> bool((out.energy_kwh_pred >= 0).all()), m.n_parameters_
     (True, 3393)
+
+    The default (probabilistic) model also gives intervals, see
+    :meth:`predict_interval`.
     """
 
     _residual = True  # target E* - E_p; PureML sets False (target E*)
@@ -263,6 +269,14 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         allowed = ("infer", "marginalize", *PROFILES)
         if self.missing_mode not in allowed:
             raise ValueError(f"{o}.missing_mode={self.missing_mode!r}; allowed: {list(allowed)}")
+        spread = (self.n_members > 1 or self.heteroscedastic
+                  or (self.calibrate_physics and self._residual))
+        if self.conformal_fraction > 0 and not spread:
+            raise ValueError(
+                f"{o}.conformal_fraction={self.conformal_fraction!r} needs a predictive spread "
+                "to calibrate, but n_members=1, heteroscedastic=False and no physics posterior "
+                "give none: set conformal_fraction=0 (the paper's point model) or use "
+                "n_members >= 2, heteroscedastic=True or calibrate_physics=True")
 
     def __sklearn_is_fitted__(self) -> bool:
         return hasattr(self, "net_")
@@ -436,7 +450,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
             A copy of ``trips`` with :func:`hybridev.simulate`'s columns
             (``energy_kwh_physics``, ``soc_final_physics``, ``max_speed_kmh``,
             ``kwh_per_km_physics``) plus ``energy_kwh_pred`` (kWh, the mean
-            over members) and ``soc_final_pred`` (``max(0, s0 - E/C)``).
+            over members) and ``soc_final_pred`` (``s0 - E/C`` clipped to [0, 1]).
+            With a physics posterior (``calibrate_physics=True``) the physics
+            columns are those of the posterior-median parameters.
 
         Warns
         -----
@@ -456,8 +472,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                           "add the learned residual", PhysicsFallbackWarning, stacklevel=2)
             energy = e_phys
         out["energy_kwh_pred"] = energy
-        out["soc_final_pred"] = np.maximum(
-            0.0, out["soc_initial"].to_numpy(float) - energy / self._vehicle().battery_capacity_kwh)
+        out["soc_final_pred"] = soc_from_energy(out["soc_initial"].to_numpy(float), energy,
+                                                self._vehicle().battery_capacity_kwh)
         return out
 
     # -- persistence ----------------------------------------------------------------------

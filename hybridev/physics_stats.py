@@ -74,6 +74,7 @@ STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps
 
 _J_PER_KWH = 3.6e6
 _SUMS = ("roll", "aero", "lin", "rest")
+_SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 cache)
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,6 +219,10 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     >>> s = stats_from_traces(v, 2.0, profile="eco")
     >>> bool(abs(energy_from_stats(s)[0] - trace_energy_kwh(v, [2.0], profile="eco")[0]) < 1e-15)
     True
+    >>> g = [[0.0, 0.02, 0.04, 0.0, -0.05, -0.02]]  # per-sample grade, rad
+    >>> s = stats_from_traces(v, 2.0, grade_rad=g)
+    >>> bool(abs(energy_from_stats(s)[0] / trace_energy_kwh(v, [2.0], grade_rad=g)[0] - 1) < 1e-12)
+    True
     """
     veh = vehicle or VehicleParams()
     v = np.atleast_2d(np.asarray(speed_mps, dtype=float))
@@ -228,16 +233,68 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     dt = np.broadcast_to(np.asarray(dt_s, dtype=float).reshape(-1, 1), (n, 1))
     if not np.all(np.isfinite(dt) & (dt > 0)):
         raise ValueError(f"dt_s={dt_s!r} must be finite and > 0 seconds")
-    th = np.broadcast_to(np.asarray(grade_rad, dtype=float), v.shape)
-    th = 0.5 * (th[:, 1:] + th[:, :-1])
-    vm = 0.5 * (v[:, 1:] + v[:, :-1])
-    comps, pos = _components(vm, np.diff(v, axis=1) / dt, np.cos(th), np.sin(th), dt, veh)
-    sp = [np.where(pos, c, 0.0).sum(axis=1) for c in comps]
-    sn = [np.where(pos, 0.0, c).sum(axis=1) for c in comps]
+    g = np.asarray(grade_rad, dtype=float)
+    if g.ndim == 0 or g.shape[-1] == 1:  # one grade per trip: factor it out of the sums
+        th = np.broadcast_to(g.reshape(-1, 1) if g.ndim else g, (n, 1))
+    else:
+        th = np.broadcast_to(g, v.shape)
+        th = 0.5 * (th[:, 1:] + th[:, :-1])
+    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh)
+            for i in range(0, n, _SUB)]  # cache-sized blocks of trips
+    sp, sn = ([np.concatenate([x[j][c] for x in sums]) for c in range(4)] for j in (0, 1))
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
                      max_speed_kmh=v.max(axis=1) * 3.6)
+
+
+def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
+    """(roll, aero, lin, rest) sums over driving and braking intervals of uniform traces, kWh.
+
+    ``v`` (n, N + 1) m/s, ``dt`` (n, 1) s, ``th`` interval grades (n, 1) or (n, N) rad.
+    Hot path: the sign of ``P_w`` is that of the road-load-plus-inertia force
+    (``v > 0``; intervals with ``v = 0`` contribute nothing), and all signed
+    sums come from one batched matrix product of per-interval moments with the
+    two masks, without the full component arrays.
+    """
+    m, g = veh.mass_kg, veh.gravity_mps2
+    n, n_int = v.shape[0], v.shape[1] - 1
+    per_trip = th.shape[1] == 1
+    k = 3 if per_trip else 4  # rows of the moments: [v, (v sin,) v^2, v^3, v dv]
+    a = np.empty((n, k + 1, n_int))  # per interval, v the interval-mean speed
+    vm = np.add(v[:, 1:], v[:, :-1], out=a[:, 0])
+    vm *= 0.5
+    dv = np.subtract(v[:, 1:], v[:, :-1], out=a[:, -1])
+    cos_th, sin_th = np.cos(th), np.sin(th)
+    force = vm * (0.5 * veh.air_density_kg_m3 * veh.drag_area_m2)
+    if veh.linear_drag_n_per_mps:
+        force += veh.linear_drag_n_per_mps
+    force *= vm
+    force += (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th
+    dv *= m / dt  # inertial force
+    force += dv
+    v2 = np.multiply(vm, vm, out=a[:, k - 2])
+    np.multiply(v2, vm, out=a[:, k - 1])
+    dv *= vm
+    if not per_trip:
+        np.multiply(vm, sin_th, out=a[:, 1])
+        vm *= cos_th  # row 0 becomes v cos
+    mask = np.empty((n, 2, n_int))
+    np.greater(force, 0.0, out=mask[:, 0])
+    np.subtract(1.0, mask[:, 0], out=mask[:, 1])
+    s = np.matmul(a, mask.transpose(0, 2, 1))  # (n, k + 1, 2): sums over driving, braking
+    c = dt / _J_PER_KWH  # (n, 1)
+    if per_trip:
+        roll = (m * g) * cos_th * s[:, 0] * c
+        rest_grade = (m * g) * sin_th * s[:, 0] * c
+    else:
+        roll = (m * g) * s[:, 0] * c
+        rest_grade = (m * g) * s[:, 1] * c
+    aero = (0.5 * veh.air_density_kg_m3) * s[:, k - 1] * c
+    lin = s[:, k - 2] * c
+    rest = rest_grade + s[:, -1] * c
+    comps = (roll, aero, lin, rest)
+    return [x[:, 0] for x in comps], [x[:, 1] for x in comps]
 
 
 def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
@@ -363,16 +420,17 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         if "grade_pct" in trips.columns:
             cols["grade_pct"] = trips["grade_pct"].to_numpy(float)[trip[~rl]]
         syn = pd.DataFrame(cols)
+        syn_modes = modes[~rl]  # object array (pandas would iterate a string column slowly)
         dest = np.flatnonzero(~rl)
         for blk, v, dt, grade in _blocks(syn, n_steps, seed):
-            s = stats_from_traces(v, dt, vehicle=veh, profile=list(syn["mode"].iloc[blk]),
+            s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
                                   grade_rad=grade)
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
             vmax[dest[blk]] = s.max_speed_kmh
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
-                    duration, temp[trip], list(modes), veh, trip=trip, log_weight=log_w,
+                    duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax)
 
 
@@ -409,6 +467,13 @@ def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
     p = _param_values(stats, params)
     inv = 1.0 / p["drivetrain_efficiency"]
     cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
+    s = p["regen_scale"]
+    coef = (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
+            p["hvac_scale"], np.ones(()))
+    shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
+    if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
+        c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
+        return (c[..., 0, :] if shape else c) @ stats.features()
     return (stats.mult * inv * (cr * stats.roll_pos + cda * stats.aero_pos + b * stats.lin_pos
                                 + stats.rest_pos)
             + stats.eta_r * p["regen_scale"] * (cr * stats.roll_neg + cda * stats.aero_neg

@@ -35,21 +35,26 @@ from .mixture import mixture_quantile
 
 __all__ = ["EnergyDistribution", "soc_from_energy"]
 
+_MIN_STD_KWH = 1e-9
+"""Width given to zero-variance mixture components when computing quantiles, kWh."""
+
 
 def soc_from_energy(soc_initial, energy_kwh, capacity_kwh: float) -> np.ndarray:
-    """Final SoC ``max(0, s0 - E / C)``.
+    """Final SoC ``s0 - E / C`` clipped to [0, 1].
 
     The map is monotone non-increasing in energy, so quantiles of energy map
     to quantiles of SoC (upper energy -> lower SoC), with a point mass at 0
-    when the battery empties.
+    when the battery empties (and at 1 when net regeneration, ``E < 0``,
+    would overfill it: the battery stops charging when full, as
+    :func:`hybridev.simulate`'s ``soc_final_physics``).
 
     Examples
     --------
-    >>> soc_from_energy(0.5, [10.0, 50.0], 75.0).round(3).tolist()
-    [0.367, 0.0]
+    >>> soc_from_energy(0.5, [10.0, 50.0, -50.0], 75.0).round(3).tolist()
+    [0.367, 0.0, 1.0]
     """
-    return np.maximum(0.0, np.asarray(soc_initial, float) - np.asarray(energy_kwh, float)
-                      / capacity_kwh)
+    return np.clip(np.asarray(soc_initial, float) - np.asarray(energy_kwh, float)
+                   / capacity_kwh, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -135,7 +140,8 @@ class EnergyDistribution:
     def quantile(self, q) -> np.ndarray:
         """Marginal quantiles of energy, shape ``np.shape(q) + (n_trips,)``, kWh."""
         means, stds, w = self.components()
-        return mixture_quantile(means, stds, w, q)
+        # point components (no variance head, no posterior) get a negligible width
+        return mixture_quantile(means, np.maximum(stds, _MIN_STD_KWH), w, q)
 
     def interval(self, level: float) -> tuple[np.ndarray, np.ndarray]:
         """Central interval of the given confidence ``level`` per trip, kWh."""

@@ -17,6 +17,8 @@ from hybridev import (
 from hybridev.baselines import LINEAR_TERMS, linear_design_matrix
 
 N_STEPS = 100
+PAPER = dict(n_members=1, heteroscedastic=False, calibrate_physics=False, conformal_fraction=0.0)
+"""The paper's point network (PureML inherits HybridModel's probabilistic defaults)."""
 
 
 @pytest.fixture(scope="module")
@@ -73,8 +75,9 @@ def test_physics_only_equals_simulate_and_handles_unknown_mode(measured):
 
 
 def test_pure_ml_uses_no_physics_inputs_and_learns(measured, tmp_path):
-    m = PureML(n_steps=N_STEPS, max_epochs=40).fit(measured, seed=0)
+    m = PureML(**PAPER, n_steps=N_STEPS, max_epochs=40).fit(measured, seed=0)
     assert "energy_kwh_physics" not in m.feature_names_ and m.n_features_in_ == 9
+    assert m.n_parameters_ == 3265
     out = m.predict(measured)
     rel = np.abs(out.energy_kwh_pred / measured.energy_kwh - 1.0)
     assert float(rel.mean()) < 0.25 and (out.energy_kwh_pred >= 0).all()
@@ -99,3 +102,17 @@ def test_baselines_validate_input(model, measured):
     fitted = model.fit(measured)
     with pytest.raises(ValueError, match="missing required column"):
         fitted.predict(measured.drop(columns=["avg_speed_kmh"]))
+
+
+def test_pure_ml_default_is_probabilistic_without_physics(measured):
+    """PureML with the default ensemble + conformal step: intervals, but no physics posterior
+    and no physics part in its distribution."""
+    m = PureML(n_steps=N_STEPS, n_members=2, max_epochs=5).fit(measured, seed=0)
+    assert m.posterior_ is None and m.conformal_.n_calibration == round(0.15 * len(measured))
+    trips = measured.drop(columns=["energy_kwh"]).head(50)
+    out = m.predict_interval(trips, 0.8)
+    assert (out.energy_kwh_lo <= out.energy_kwh_pred).all()
+    assert (out.energy_kwh_pred <= out.energy_kwh_hi).all() and (out.energy_kwh_lo >= 0).all()
+    np.testing.assert_allclose(out.energy_kwh_pred, m.predict(trips).energy_kwh_pred, rtol=1e-9)
+    dist = m.predict_distribution(trips, level=0.8)
+    assert not dist.physics_draws_kwh.any()  # the network predicts the whole energy

@@ -300,16 +300,13 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
 
 
 def test_cli_plan_with_saved_model(tmp_path, capsys):
-    # Runs once HybridModel has predict_distribution (built concurrently by another helper).
-    model_mod = pytest.importorskip("hybridev.model")
-    if not hasattr(model_mod.HybridModel, "predict_distribution"):
-        pytest.skip("HybridModel.predict_distribution is not available yet")
-    from hybridev import make_trips, simulate
+    from hybridev import HybridModel, make_trips, simulate
 
     t = simulate(make_trips(40, seed=0), n_steps=100)
     t["energy_kwh"] = t["energy_kwh_physics"] * 1.1
-    model = model_mod.HybridModel(max_epochs=3, n_steps=100, n_members=2,
-                                  heteroscedastic=True).fit(t, seed=0)
+    # 10 calibration trips: enough for the planner's 90 % conformal spread factor
+    model = HybridModel(max_epochs=3, n_steps=100, n_members=2, heteroscedastic=True,
+                        conformal_fraction=0.25).fit(t, seed=0)
     model.save(tmp_path / "model")
     sched = tmp_path / "s.csv"
     schedule(TWO_DAYS, 5.0 * ENERGY).to_csv(sched, index=False)

@@ -11,5 +11,7 @@ COMMAND_MODULES = (
     "hybridev.commands.fit",
     "hybridev.commands.predict",
     "hybridev.commands.plan_charging",
+    "hybridev.commands.calibrate",
+    "hybridev.commands.range",
 )
 """Modules registered as subcommands, in help order."""
