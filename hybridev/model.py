@@ -30,6 +30,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
@@ -37,6 +38,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
+from .calibrate import DEFAULT_PARAMS
 from .conformal import NormalizedConformal
 from .features import (
     FEATURE_NAMES,
@@ -46,21 +48,33 @@ from .features import (
     physics_modes,
     trip_features,
 )
+from .logs import LoggedTraces, MeasuredTrips, validate_timeseries
 from .measured import validate_measured_trips
 from .nn import train_ensemble
-from .params import PROFILES, VehicleParams
+from .params import PROFILES, DrivingProfile, VehicleParams
 from .persist import load_model, save_model
+from .physics_stats import STAT_PARAMS, energy_from_stats, trip_stats
 from .predictive import soc_from_energy
 from .trips import simulate
 from .uncertainty import ProbabilisticMixin
 from .validation import TRIP_RULES, check_table
 
 __all__ = [
+    "PAPER_CONFIG",
     "VAL_FRACTION",
     "HybridModel",
     "PhysicsFallbackWarning",
+    "as_traces",
     "validate_prediction_trips",
 ]
+
+PAPER_CONFIG = MappingProxyType({
+    "n_members": 1, "heteroscedastic": False, "calibrate_physics": False,
+    "conformal_fraction": 0.0, "residual_target": "absolute"})
+"""Constructor settings of the paper's point model: one network (10/11-64-32-16-1,
+dropout 0.2) trained with MSE on the absolute residual ``E* - E_p`` against the
+nominal physics; no posterior, no ensemble, no conformal step.
+``HybridModel(**PAPER_CONFIG)``."""
 
 VAL_FRACTION = 0.15 / 0.85
 """Default validation share: the paper's 225 validation trips of 1,050 + 225."""
@@ -68,6 +82,39 @@ VAL_FRACTION = 0.15 / 0.85
 _PREDICT_BLOCK_ROWS = 65_536
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
+_MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
+
+
+def _physics_table(trips: pd.DataFrame, energy_kwh: np.ndarray, max_speed_kmh: np.ndarray,
+                   capacity_kwh: float) -> pd.DataFrame:
+    """``trips`` plus simulate's physics columns from given energies and top speeds."""
+    out = trips.copy()
+    out["energy_kwh_physics"] = energy_kwh
+    out["soc_final_physics"] = np.clip(
+        out["soc_initial"].to_numpy(float) - energy_kwh / capacity_kwh, 0.0, 1.0)
+    out["max_speed_kmh"] = max_speed_kmh
+    out["kwh_per_km_physics"] = energy_kwh / out["distance_km"].to_numpy(float)
+    return out
+
+
+def as_traces(timeseries) -> LoggedTraces | None:
+    """``None``, a :class:`~hybridev.logs.LoggedTraces`, or a time-series table to validate.
+
+    A table (``trip_id``, ``t_s``, ``speed_kmh``, optional ``elevation_m`` /
+    ``grade_pct``, ``amb_temp_c``) must validate completely; use
+    :func:`hybridev.logs.read_measured_trips` to report and skip bad traces.
+    """
+    if timeseries is None or isinstance(timeseries, LoggedTraces):
+        return timeseries
+    if isinstance(timeseries, pd.DataFrame):
+        traces, rejected = validate_timeseries(timeseries)
+        if len(rejected):
+            raise ValueError(f"timeseries: {len(rejected)} trace(s) rejected; first: "
+                             f"{rejected['reason'].iloc[0]} (read_measured_trips reports "
+                             "and skips them)")
+        return traces
+    raise ValueError("timeseries must be None, a LoggedTraces or a time-series DataFrame; "
+                     f"got {type(timeseries).__name__}")
 
 
 class PhysicsFallbackWarning(UserWarning):
@@ -147,10 +194,21 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         Share of the measured trips held out of all fitting for the
         split-conformal calibration of intervals, in [0, 1); 0 leaves the
         intervals uncalibrated.
-    missing_mode : str
+    missing_mode : str or DrivingProfile
         Physics of trips without ``mode`` in the calibration: ``"infer"``
         (mixture over the profiles with sampled weights), ``"marginalize"``
-        (equal weights) or a mode name.
+        (equal weights), a mode name, or a profile (e.g. efficiency
+        multiplier 1 for logged traces, whose driving style is in the trace).
+    residual_target : {"relative", "absolute"}
+        What the networks learn. ``"absolute"`` is the paper's ``dE = E* -
+        E_p`` in kWh. ``"relative"`` (default) learns ``dE / s`` with the scale
+        ``s = max(|E_p|, 0.05 kWh/km * d)``: unmodelled effects are mostly
+        proportional to the physics energy, so a relative residual carries
+        over to trips longer than the training ones and weights short trips
+        as MAPE does. Predictions are ``E_p + s * dE_rel`` either way.
+    physics_params : tuple of str
+        Physics parameters sampled by the calibration (see
+        :data:`hybridev.physics_stats.STAT_PARAMS`).
 
     Attributes
     ----------
@@ -180,9 +238,7 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
     >>> from hybridev import make_trips, simulate
     >>> t = simulate(make_trips(40, seed=0), n_steps=100)
     >>> t["energy_kwh"] = t["energy_kwh_physics"] * 1.1
-    >>> paper = dict(n_members=1, heteroscedastic=False, calibrate_physics=False,
-    ...              conformal_fraction=0.0)  # the paper's point model
-    >>> m = HybridModel(**paper, max_epochs=3, n_steps=100).fit(t, seed=0)
+    >>> m = HybridModel(**PAPER_CONFIG, max_epochs=3, n_steps=100).fit(t, seed=0)
     >>> out = m.predict(t.drop(columns=["energy_kwh"]))
     >>> bool((out.energy_kwh_pred >= 0).all()), m.n_parameters_
     (True, 3393)
@@ -204,7 +260,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                  val_fraction: float = VAL_FRACTION, n_steps: int = 1000,
                  physics_seed: int = 0, calibrate_physics: bool = True,
                  n_posterior_draws: int = 200, conformal_fraction: float = 0.15,
-                 missing_mode: str = "infer") -> None:
+                 missing_mode: str | DrivingProfile = "infer",
+                 residual_target: str = "relative",
+                 physics_params: tuple[str, ...] = DEFAULT_PARAMS) -> None:
         self.vehicle = vehicle
         self.features = features
         self.n_members = n_members
@@ -225,6 +283,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         self.n_posterior_draws = n_posterior_draws
         self.conformal_fraction = conformal_fraction
         self.missing_mode = missing_mode
+        self.residual_target = residual_target
+        self.physics_params = physics_params
 
     # -- configuration -------------------------------------------------------------------
     def _vehicle(self) -> VehicleParams:
@@ -267,8 +327,16 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         _check_range(f"{o}.n_posterior_draws", self.n_posterior_draws, 1, 100_000, integer=True)
         _check_range(f"{o}.conformal_fraction", self.conformal_fraction, 0.0, 0.9)
         allowed = ("infer", "marginalize", *PROFILES)
-        if self.missing_mode not in allowed:
-            raise ValueError(f"{o}.missing_mode={self.missing_mode!r}; allowed: {list(allowed)}")
+        if not (isinstance(self.missing_mode, DrivingProfile) or self.missing_mode in allowed):
+            raise ValueError(f"{o}.missing_mode={self.missing_mode!r}; allowed: {list(allowed)} "
+                             "or a DrivingProfile")
+        if self.residual_target not in ("relative", "absolute"):
+            raise ValueError(f"{o}.residual_target={self.residual_target!r}; allowed: "
+                             "'relative', 'absolute'")
+        bad = [p for p in self.physics_params if p not in STAT_PARAMS]
+        if bad or len(self.physics_params) == 0:
+            raise ValueError(f"{o}.physics_params={self.physics_params!r}; allowed: a non-empty "
+                             f"subset of {list(STAT_PARAMS)}")
         spread = (self.n_members > 1 or self.heteroscedastic
                   or (self.calibrate_physics and self._residual))
         if self.conformal_fraction > 0 and not spread:
@@ -287,22 +355,42 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                                  "fit(measured_trips) first (or load a fitted model)")
 
     # -- building blocks (also used by the probabilistic layer) ---------------------------
-    def _physics(self, trips: pd.DataFrame) -> pd.DataFrame:
-        """Validated trips with the physics columns (unknown modes simulated as ``"normal"``).
+    def _physics(self, trips: pd.DataFrame, traces: LoggedTraces | None = None
+                 ) -> pd.DataFrame:
+        """Validated trips with the physics columns.
 
-        ``trips`` is a trip table whose ``mode`` may be missing or empty; it
-        is validated here (by :func:`hybridev.simulate`). Returns simulate's
-        output with the ``mode`` column normalised (``None`` where unknown).
+        ``trips`` is a trip table whose ``mode`` may be missing or empty. With
+        a physics posterior the physics is the posterior median; trips with a
+        logged trace in ``traces`` (by ``trip_id``) use it instead of a
+        synthesised one. Without a posterior, unknown modes are simulated as
+        ``"normal"`` (or ``missing_mode`` when it is a profile or mode name).
+        Returns simulate-like columns with ``mode`` normalised (``None``
+        where unknown).
         """
         if not isinstance(trips, pd.DataFrame):
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if getattr(self, "posterior_", None) is not None:
-            return self._posterior_physics(self._validated(trips), 0, 0)[0]
+            return self._posterior_physics(self._validated(trips), 0, 0, traces)[0]
+        if traces is not None:
+            t = self._validated(trips)
+            mm = self.missing_mode if self.missing_mode not in ("infer", "marginalize") \
+                else "normal"
+            st = trip_stats(t, self._vehicle(), traces=traces, n_steps=int(self.n_steps),
+                            seed=int(self.physics_seed), missing_mode=mm)
+            return _physics_table(t, energy_from_stats(st), st.max_speed_kmh,
+                                  self._vehicle().battery_capacity_kwh)
         modes = normalize_modes(trips.get("mode"), len(trips))
         out = simulate(trips.assign(mode=physics_modes(modes)), self._vehicle(),
                        n_steps=int(self.n_steps), seed=int(self.physics_seed))
         out["mode"] = modes  # simulate raises on any bad row, so rows are unchanged
         return out
+
+    def _target_scale(self, energy_physics_kwh, distance_km) -> np.ndarray:
+        """Scale of the network target: 1 (absolute) or ``max(|E_p|, 0.05 d)`` kWh."""
+        e = np.asarray(energy_physics_kwh, dtype=float)
+        if self.residual_target == "absolute" or not self._residual:
+            return np.ones_like(e)
+        return np.maximum(np.abs(e), _MIN_SCALE_KWH_PER_KM * np.asarray(distance_km, float))
 
     def _validated(self, trips: pd.DataFrame) -> pd.DataFrame:
         """Validated prediction trips (``mode`` ``None`` where unknown)."""
@@ -315,13 +403,15 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         x = trip_features(physics_table, self.feature_names_)
         return ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
 
-    def _residual_moments(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    def _residual_moments(self, x: np.ndarray, scale=1.0) -> tuple[np.ndarray, np.ndarray | None]:
         """Per-member network output in kWh.
 
         Parameters
         ----------
         x : numpy.ndarray, shape (n_trips, n_features)
             Standardised inputs from :meth:`_features`.
+        scale : float or numpy.ndarray (n_trips,), kWh per target unit
+            :meth:`_target_scale` of the trips (1 for an absolute target).
 
         Returns
         -------
@@ -338,10 +428,12 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                 m, v = self.net_(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
                 means.append(m.numpy())
                 variances.append(None if v is None else v.numpy())
-        mean = np.concatenate(means, axis=1).astype(float) * self.target_std_ + self.target_mean_
+        scale = np.asarray(scale, dtype=float)
+        mean = (np.concatenate(means, axis=1).astype(float) * self.target_std_
+                + self.target_mean_) * scale
         if variances[0] is None:
             return mean, None
-        return mean, np.concatenate(variances, axis=1).astype(float) * self.target_std_**2
+        return mean, np.concatenate(variances, axis=1).astype(float) * (self.target_std_ * scale)**2
 
     def _combine(self, energy_physics: np.ndarray, network_mean: np.ndarray) -> np.ndarray:
         """Point energy (kWh) from the physics and the members' mean output."""
@@ -350,8 +442,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         return np.maximum(energy_physics + network_mean, np.minimum(energy_physics, 0.0))
 
     # -- public API ---------------------------------------------------------------------
-    def fit(self, measured_trips: pd.DataFrame, *, seed: int = 0,
-            progress: Callable[[int], None] | None = None) -> HybridModel:
+    def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
+            timeseries=None, progress: Callable[[int], None] | None = None) -> HybridModel:
         """Fit the residual network on measured trips.
 
         Parameters
@@ -361,6 +453,10 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
             trip columns plus ``energy_kwh`` (kWh) and/or ``soc_final``.
         seed : int
             Seeds the validation split, initialisation, data order and dropout.
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id``: the physics of those trips
+            (calibration, features, residuals) runs on the real trace. A
+            :class:`~hybridev.logs.MeasuredTrips` brings its own traces.
         progress : callable, optional
             Called with the number of finished epochs.
 
@@ -376,6 +472,11 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         self._check_params()
         _check_range("seed", seed, 0, 2**63 - 1, integer=True)  # of fit
         t0 = time.perf_counter()
+        if isinstance(measured_trips, MeasuredTrips):
+            traces = measured_trips.traces if timeseries is None else as_traces(timeseries)
+            measured_trips = measured_trips.trips
+        else:
+            traces = as_traces(timeseries)
         good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
         n = len(good)
         split_ss, torch_ss = np.random.SeedSequence(int(seed)).spawn(2)
@@ -393,13 +494,14 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         for attr in ("posterior_", "conformal_"):
             setattr(self, attr, None)
         if self._residual:  # the calibration trips stay out of the physics posterior too
-            self._fit_posterior(good.iloc[np.sort(order[n_cal:])], seed)
-        phys = self._physics(good)
+            self._fit_posterior(good.iloc[np.sort(order[n_cal:])], seed, traces)
+        phys = self._physics(good, traces)
         names = self._feature_names()
         x = trip_features(phys, names)
         e_meas = good["energy_kwh"].to_numpy(float)
         e_phys = phys["energy_kwh_physics"].to_numpy(float)
-        y = e_meas - e_phys if self._residual else e_meas
+        scale = self._target_scale(e_phys, good["distance_km"].to_numpy(float))
+        y = (e_meas - e_phys) / scale if self._residual else e_meas
         self.feature_names_ = names
         self.n_features_in_ = len(names)
         self.feature_mean_, self.feature_std_ = fit_standardizer(x[tr_idx])
@@ -421,21 +523,22 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         self.history_ = hist
         self.n_parameters_ = net.n_parameters_per_member
         if n_cal:
-            _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed))
+            _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed), traces=traces)
             self.conformal_ = NormalizedConformal.fit(e_meas[cal_idx], dist.mean(), dist.std())
         info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
                 "seed": int(seed),
                 "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
                 "n_parameters_per_member": self.n_parameters_}
         if n_val:
-            pred = self._combine(e_phys[val_idx], self._residual_moments(xs[val_idx])[0].mean(0))
+            dev = self._residual_moments(xs[val_idx], scale[val_idx])[0].mean(0)
+            pred = self._combine(e_phys[val_idx], dev)
             info["val_mae_kwh_physics"] = float(np.mean(np.abs(e_meas[val_idx] - e_phys[val_idx])))
             info["val_mae_kwh_model"] = float(np.mean(np.abs(e_meas[val_idx] - pred)))
         info["fit_seconds"] = round(time.perf_counter() - t0, 3)
         self.fit_info_ = info
         return self
 
-    def predict(self, trips: pd.DataFrame) -> pd.DataFrame:
+    def predict(self, trips: pd.DataFrame, *, timeseries=None) -> pd.DataFrame:
         """Predict trip energy and final SoC.
 
         Parameters
@@ -443,6 +546,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         trips : pandas.DataFrame
             A trip table; ``mode`` may be missing or ``None`` and ``hour``
             missing (see the module docstring).
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id`` (see :meth:`fit`).
 
         Returns
         -------
@@ -462,10 +567,12 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         if not hasattr(self, "net_") and not self._fallback_to_physics:
             self._require_fitted()
         self._check_params()
-        out = self._physics(trips)  # validates the trips
+        out = self._physics(trips, as_traces(timeseries))  # validates the trips
         e_phys = out["energy_kwh_physics"].to_numpy(float)
         if hasattr(self, "net_"):
-            energy = self._combine(e_phys, self._residual_moments(self._features(out))[0].mean(0))
+            scale = self._target_scale(e_phys, out["distance_km"].to_numpy(float))
+            energy = self._combine(e_phys,
+                                   self._residual_moments(self._features(out), scale)[0].mean(0))
         else:
             warnings.warn(f"{type(self).__name__} is not fitted: energy_kwh_pred is the physics "
                           "prediction only (energy_kwh_physics); fit it on measured trips to "

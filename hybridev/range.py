@@ -272,7 +272,8 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
         if name in names:
             j = names.index(name)
             x[:, :, j] = (val - model.feature_mean_[j]) / model.feature_std_[j]
-    mean, var = model._residual_moments(x.reshape(n * g, -1))
+    mean, var = model._residual_moments(x.reshape(n * g, -1),
+                                        model._target_scale(e_med.ravel(), r.ravel()))
     std = np.full_like(mean, _MIN_STD_KWH) if var is None else np.sqrt(var)
     std = np.maximum(std, _MIN_STD_KWH)
     if model._residual:

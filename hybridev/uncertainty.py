@@ -62,7 +62,16 @@ from .physics_posterior import PhysicsPosterior
 from .physics_stats import energy_from_stats
 from .predictive import EnergyDistribution, soc_from_energy
 
-__all__ = ["ProbabilisticMixin"]
+__all__ = ["KEEP_POSTERIOR_DRAWS", "ProbabilisticMixin"]
+
+KEEP_POSTERIOR_DRAWS = 500
+"""Posterior draws a fitted model keeps (evenly spaced over the thinned chain)."""
+
+
+def _as_traces(timeseries):
+    from .model import as_traces  # model imports this module
+
+    return as_traces(timeseries)
 
 
 def _check_level(level) -> None:
@@ -77,15 +86,15 @@ class ProbabilisticMixin:
     """Physics posterior, predictive distributions and conformal intervals for HybridModel."""
 
     # -- physics -----------------------------------------------------------------------
-    def _posterior_physics(self, trips: pd.DataFrame, n_draws: int, seed: int
-                           ) -> tuple[pd.DataFrame, np.ndarray]:
+    def _posterior_physics(self, trips: pd.DataFrame, n_draws: int, seed: int,
+                           traces=None) -> tuple[pd.DataFrame, np.ndarray]:
         """Simulate-like table at the posterior median, and (n_draws, n_trips) energies.
 
         ``trips`` must be validated (:meth:`_validated`). The statistics are
         built once; the median and the draws are one matrix product.
         """
         post: PhysicsPosterior = self.posterior_
-        stats = post.stats_for(trips)
+        stats = post.stats_for(trips, traces)
         med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
         draws = (post.sample(n_draws, np.random.default_rng(seed)) if n_draws
                  else np.empty((0, med.size)))
@@ -105,15 +114,26 @@ class ProbabilisticMixin:
         out["kwh_per_km_physics"] = e_med / out["distance_km"].to_numpy(float)
         return out, e_draws
 
-    def _fit_posterior(self, measured: pd.DataFrame, seed: int) -> None:
+    def _fit_posterior(self, measured: pd.DataFrame, seed: int, traces=None) -> None:
         if not self.calibrate_physics or not self._residual:
             return
         mode = self.missing_mode
-        if mode == "infer" and measured["mode"].notna().all():
+        if isinstance(mode, str) and mode == "infer" and measured["mode"].notna().all():
             mode = "marginalize"  # nothing to infer from: every trip is labelled
-        self.posterior_ = calibrate_physics(
-            measured, self._vehicle(), seed=int(seed), missing_mode=mode,
+        post = calibrate_physics(
+            measured, self._vehicle(), params=tuple(self.physics_params), seed=int(seed),
+            missing_mode=mode, timeseries=traces,
             trace_steps=int(self.n_steps), trace_seed=int(self.physics_seed))
+        # Keep at most KEEP_POSTERIOR_DRAWS evenly spaced draws, rounded to float32,
+        # so that the saved model stays small and loads to exactly this posterior.
+        keep = np.unique(np.linspace(0, len(post.samples) - 1,
+                                     min(len(post.samples), KEEP_POSTERIOR_DRAWS)).round()
+                         .astype(int))
+        post.samples = post.samples[keep].astype(np.float32).astype(float)
+        post.noise_rel = post.noise_rel[keep].astype(np.float32).astype(float)
+        if post.mode_weights is not None:
+            post.mode_weights = post.mode_weights[keep].astype(np.float32).astype(float)
+        self.posterior_ = post
 
     # -- distribution ------------------------------------------------------------------
     def _has_spread(self) -> bool:
@@ -135,18 +155,19 @@ class ProbabilisticMixin:
                 f"{what}; fit with n_members >= 2, heteroscedastic=True or "
                 "calibrate_physics=True (the defaults) for one")
 
-    def _distribution(self, trips: pd.DataFrame, *, seed: int = 0
+    def _distribution(self, trips: pd.DataFrame, *, seed: int = 0, traces=None
                       ) -> tuple[pd.DataFrame, EnergyDistribution]:
         """Physics table and the raw (spread factor 1) predictive distribution."""
         self._require_fitted()
         if getattr(self, "posterior_", None) is not None:
             table, draws = self._posterior_physics(self._validated(trips),
-                                                   int(self.n_posterior_draws), seed)
+                                                   int(self.n_posterior_draws), seed, traces)
         else:
-            table = self._physics(trips)
+            table = self._physics(trips, traces)
             draws = table["energy_kwh_physics"].to_numpy(float)[None, :]
         e_p = table["energy_kwh_physics"].to_numpy(float)
-        mean, var = self._residual_moments(self._features(table))
+        scale = self._target_scale(e_p, table["distance_km"].to_numpy(float))
+        mean, var = self._residual_moments(self._features(table), scale)
         std = np.zeros_like(mean) if var is None else np.sqrt(var)
         if not self._residual:  # PureML: no physics part
             centred = np.zeros_like(draws)
@@ -171,7 +192,7 @@ class ProbabilisticMixin:
         return q
 
     def predict_distribution(self, trips: pd.DataFrame, *, level: float = 0.9,
-                             seed: int = 0) -> EnergyDistribution:
+                             seed: int = 0, timeseries=None) -> EnergyDistribution:
         """Predictive distribution of the trips' energies (joint across trips).
 
         Parameters
@@ -184,6 +205,8 @@ class ProbabilisticMixin:
             :meth:`hybridev.conformal.NormalizedConformal.spread_factor`).
         seed : int
             Seeds the choice of posterior draws.
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id`` (see :meth:`HybridModel.fit`).
 
         Returns
         -------
@@ -200,7 +223,7 @@ class ProbabilisticMixin:
         """
         self._require_probabilistic("predict_distribution")
         q = self._conformal_factor(level)
-        _, dist = self._distribution(trips, seed=seed)
+        _, dist = self._distribution(trips, seed=seed, traces=_as_traces(timeseries))
         if q is None:
             return dist
         factor = self.conformal_.spread_factor(level)
@@ -208,7 +231,7 @@ class ProbabilisticMixin:
                                   dist.residual_std_kwh, spread_factor=max(factor, 1e-6))
 
     def predict_interval(self, trips: pd.DataFrame, level: float = 0.9, *,
-                         seed: int = 0) -> pd.DataFrame:
+                         seed: int = 0, timeseries=None) -> pd.DataFrame:
         """Predict energy and final SoC with intervals at confidence ``level``.
 
         Parameters
@@ -219,6 +242,8 @@ class ProbabilisticMixin:
             Confidence level in (0, 1), e.g. 0.9 for a 90 % interval.
         seed : int
             Seeds the choice of posterior draws.
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id`` (see :meth:`HybridModel.fit`).
 
         Returns
         -------
@@ -251,7 +276,7 @@ class ProbabilisticMixin:
         """
         self._require_probabilistic("predict_interval")
         q = self._conformal_factor(level)
-        table, dist = self._distribution(trips, seed=seed)
+        table, dist = self._distribution(trips, seed=seed, traces=_as_traces(timeseries))
         mu, sd = dist.mean(), dist.std()
         e_p = table["energy_kwh_physics"].to_numpy(float)
         floor = np.minimum(e_p, 0.0) if self._residual else np.zeros_like(e_p)
@@ -289,10 +314,10 @@ class ProbabilisticMixin:
         if post is not None:
             d = post.to_dict()
             doc["posterior"] = {"param_names": d["param_names"], "meta": d["meta"]}
-            arrays["posterior_samples"] = d["samples"]
-            arrays["posterior_noise_rel"] = d["noise_rel"]
+            arrays["posterior_samples"] = d["samples"].astype(np.float32)
+            arrays["posterior_noise_rel"] = d["noise_rel"].astype(np.float32)
             if d["mode_weights"] is not None:
-                arrays["posterior_mode_weights"] = d["mode_weights"]
+                arrays["posterior_mode_weights"] = d["mode_weights"].astype(np.float32)
         cp = getattr(self, "conformal_", None)
         if cp is not None:
             arrays["conformal_residuals"] = cp.residuals

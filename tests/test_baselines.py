@@ -15,9 +15,10 @@ from hybridev import (
     simulate,
 )
 from hybridev.baselines import LINEAR_TERMS, linear_design_matrix
+from hybridev.model import PAPER_CONFIG
 
 N_STEPS = 100
-PAPER = dict(n_members=1, heteroscedastic=False, calibrate_physics=False, conformal_fraction=0.0)
+PAPER = dict(PAPER_CONFIG)
 """The paper's point network (PureML inherits HybridModel's probabilistic defaults)."""
 
 

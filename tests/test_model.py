@@ -16,11 +16,12 @@ import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
-from hybridev import HybridModel, PhysicsFallbackWarning, make_trips, simulate
+from hybridev import HybridModel, PhysicsFallbackWarning, make_trips, simulate, trace_energy_kwh
+from hybridev.model import PAPER_CONFIG
 from hybridev.persist import ARRAYS_FILE, DOC_FILE
 
 N_STEPS = 100  # coarse physics traces keep the tests fast; the model uses the same
-PAPER = dict(n_members=1, heteroscedastic=False, calibrate_physics=False, conformal_fraction=0.0)
+PAPER = dict(PAPER_CONFIG)
 """The paper's point model (the defaults are the probabilistic design)."""
 PHYS_COLS = ["energy_kwh_physics", "soc_final_physics", "max_speed_kmh", "kwh_per_km_physics"]
 
@@ -107,7 +108,8 @@ def test_ensemble_members_differ_and_prediction_is_their_mean(small):
     m = HybridModel(n_steps=N_STEPS, n_members=3, heteroscedastic=True, calibrate_physics=False,
                     conformal_fraction=0.0, max_epochs=4).fit(small, seed=0)
     out = m.predict(small)
-    mean, var = m._residual_moments(m._features(out))
+    scale = m._target_scale(out.energy_kwh_physics, out.distance_km)
+    mean, var = m._residual_moments(m._features(out), scale)
     assert mean.shape == var.shape == (3, len(small))
     assert np.all(var > 0)
     assert not np.allclose(mean[0], mean[1]) and not np.allclose(mean[1], mean[2])
@@ -373,3 +375,64 @@ def test_default_physics_is_the_posterior_median(prob, small):
     # the truth is 0-17 % above the nominal physics: the calibrated physics is closer
     err_cal = np.abs(out.energy_kwh_physics - small.energy_kwh).mean()
     assert err_cal < 0.7 * np.abs(nominal - small.energy_kwh).mean()
+
+
+# -- options added with the probabilistic layer ------------------------------------------
+def test_paper_config_is_the_absolute_mse_single_network():
+    assert PAPER["residual_target"] == "absolute" and PAPER["n_members"] == 1
+    with pytest.raises(TypeError):
+        PAPER_CONFIG["n_members"] = 2  # read-only mapping
+
+
+@pytest.mark.parametrize("field, value", [("residual_target", "ratio"),
+                                          ("physics_params", ("mass_kg",)),
+                                          ("missing_mode", "sporty")])
+def test_new_options_are_validated(small, field, value):
+    with pytest.raises(ValueError, match=field):
+        HybridModel(**{**PAPER, field: value}, n_steps=N_STEPS).fit(small)
+
+
+def test_relative_target_scale_follows_physics_with_a_floor():
+    m = HybridModel(residual_target="relative")
+    np.testing.assert_allclose(m._target_scale([10.0, 0.1, -2.0], [50.0, 50.0, 10.0]),
+                               [10.0, 2.5, 2.0])
+    np.testing.assert_array_equal(
+        HybridModel(residual_target="absolute")._target_scale([10.0, 0.1], [50.0, 5.0]), 1.0)
+
+
+def _logged(trips, n_logged):
+    """Time series of constant-speed 1 Hz traces for the first n_logged trips."""
+    rows = []
+    for r in trips.head(n_logged).itertuples():
+        dur = round(r.distance_km / r.avg_speed_kmh * 3600)
+        t = np.arange(dur + 1, dtype=float)
+        rows.append(pd.DataFrame({"trip_id": r.trip_id, "t_s": t,
+                                  "speed_kmh": np.full(t.size, r.avg_speed_kmh)}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def test_logged_traces_replace_synthesised_ones_in_prediction(small):
+    m = HybridModel(**PAPER, n_steps=N_STEPS, max_epochs=2).fit(small, seed=0)
+    trips = small.drop(columns=["energy_kwh"]).head(6)
+    ts = _logged(trips, 3)
+    with_logs = m.predict(trips, timeseries=ts)
+    synth = m.predict(trips)
+    # logged trips: physics on the constant-speed trace (no speed variation: less energy)
+    for i, r in enumerate(trips.head(3).itertuples()):
+        n = round(r.distance_km / r.avg_speed_kmh * 3600) + 1
+        expect = float(trace_energy_kwh(np.full(n, r.avg_speed_kmh / 3.6), 1.0,
+                                        profile=r.mode, temperature_c=r.temperature_c))
+        assert with_logs.energy_kwh_physics.iloc[i] == pytest.approx(expect, rel=1e-9)
+        assert with_logs.energy_kwh_physics.iloc[i] < synth.energy_kwh_physics.iloc[i]
+    np.testing.assert_allclose(with_logs.energy_kwh_physics.iloc[3:],
+                               synth.energy_kwh_physics.iloc[3:], rtol=1e-9)
+
+
+def test_fit_with_logged_traces_runs_the_posterior_on_them(small):
+    ts = _logged(small, 20)
+    m = HybridModel(n_steps=N_STEPS, max_epochs=2, n_members=2).fit(small, seed=0,
+                                                                      timeseries=ts)
+    out = m.predict_interval(small.head(20), 0.8, timeseries=ts)
+    assert np.all(out.energy_kwh_lo <= out.energy_kwh_hi)
+    with pytest.raises(ValueError, match="timeseries"):
+        m.predict(small.head(3), timeseries="not a table")

@@ -24,10 +24,11 @@ from scipy.stats import spearmanr
 from sklearn.exceptions import NotFittedError
 
 from hybridev import HybridModel, make_trips, simulate
+from hybridev.model import PAPER_CONFIG
 
 N_STEPS = 100
 CAP = 75.0  # kWh, the paper's vehicle
-PAPER = dict(n_members=1, heteroscedastic=False, calibrate_physics=False, conformal_fraction=0.0)
+PAPER = dict(PAPER_CONFIG)
 PHYS_COLS = ["energy_kwh_physics", "soc_final_physics", "max_speed_kmh", "kwh_per_km_physics"]
 OUT_COLS = ["energy_kwh_pred", "energy_kwh_lo", "energy_kwh_hi", "soc_final_pred",
             "soc_final_lo", "soc_final_hi", "confidence"]

@@ -13,9 +13,6 @@ import sys
 NAME = "fit"
 HELP = "train the hybrid physics + residual model on a measured-trip table and save it"
 
-PAPER = {"n_members": 1, "heteroscedastic": False, "calibrate_physics": False,
-         "conformal_fraction": 0.0}
-"""Configuration of the paper's point model (``--paper``)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -66,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  row {r.row}: {r.reason}", file=sys.stderr)
             if len(rejected) > 10:
                 print(f"  ... and {len(rejected) - 10} more", file=sys.stderr)
-    config = dict(PAPER) if args.paper else {}
+    from ..model import PAPER_CONFIG
+
+    config = dict(PAPER_CONFIG) if args.paper else {}
     for name, value in (("n_members", args.members), ("heteroscedastic", args.heteroscedastic),
                         ("calibrate_physics", args.calibrate_physics),
                         ("conformal_fraction", args.conformal_fraction)):
