@@ -14,10 +14,9 @@ the test part:
 (c) **hybrid**: :class:`hybridev.model.HybridModel` with its probabilistic
     defaults (physics posterior + deep ensemble + normalised split conformal).
 
-(a) and (b) run on the logged speed traces when the measured trips have them
-(:func:`hybridev.logs.read_measured_trips` with a time series).
-``HybridModel.fit`` does not accept logged traces yet, so (c) always runs its
-physics on synthesised traces; the report labels it so.
+All three run their physics on the logged speed traces when the measured trips
+have them (:func:`hybridev.logs.read_measured_trips` with a time series), and
+on synthesised traces otherwise.
 
 Conventions (documented choices):
 
@@ -243,9 +242,10 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
                                  missing_mode=mm, **(calibrate_kwargs or {}))
         done("calibrate")
         params = {"n_members": int(n_members),
-                  "conformal_fraction": _conformal_fraction(level, len(train.trips))}
+                  "conformal_fraction": _conformal_fraction(level, len(train.trips)),
+                  "missing_mode": mm, "physics_params": tuple(physics_params)}
         params.update(model_params or {})
-        model = HybridModel(veh, **params).fit(train.trips, seed=int(seed))
+        model = HybridModel(veh, **params).fit(train, seed=int(seed))  # with its traces
         done("train")
         caught += [f"{w.category.__name__}: {w.message}" for w in rec]
     y = held.trips["energy_kwh"].to_numpy(float)
@@ -263,7 +263,7 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
     cal_lo, cal_hi = q[:len(levels)], q[len(levels):]
     i_main = int(np.flatnonzero(np.isclose(levels, level))[0])
 
-    # (c) hybrid (physics on synthesised traces); levels beyond its conformal calibration
+    # (c) hybrid (physics on the logged traces too); levels beyond its conformal calibration
     # trips give unbounded intervals
     cp = getattr(model, "conformal_", None)
     n = len(held.trips)
@@ -273,10 +273,12 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
         warnings.simplefilter("always")
         for i, lv in enumerate(levels):
             if cp is None or np.isfinite(cp.quantile(float(lv))):
-                tabs[i] = model.predict_interval(held.trips, float(lv), seed=int(seed))
+                tabs[i] = model.predict_interval(held.trips, float(lv), seed=int(seed),
+                                                 timeseries=held.traces)
                 h_lo[i], h_hi[i] = (tabs[i][c].to_numpy(float)
                                     for c in ("energy_kwh_lo", "energy_kwh_hi"))
-        mix = (model.predict_distribution(held.trips, level=level, seed=int(seed)).components()
+        mix = (model.predict_distribution(held.trips, level=level, seed=int(seed),
+                                          timeseries=held.traces).components()
                if i_main in tabs else None)
         caught += [f"{w.category.__name__}: {w.message}" for w in rec]
     hyb = tabs[min(tabs)]  # point prediction and confidence do not depend on the level

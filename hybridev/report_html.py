@@ -98,11 +98,8 @@ def _html(s: dict, images: dict[str, bytes], rejected: pd.DataFrame) -> str:
     rej = rejected.copy()
     if len(rej):
         rej["value"] = [str(v) for v in rej["value"].tolist()]  # NaN shown as "nan"
-    traces = ("logged speed traces (nominal and calibrated physics)" if d["logged_traces"]
+    traces = ("logged speed traces (all three predictors)" if d["logged_traces"]
               else "synthesised speed traces (no time series given)")
-    hyb_note = ("<p class='note'>The hybrid model cannot take logged traces yet: its physics "
-                "runs on synthesised traces from distance and mean speed, while the nominal and "
-                "calibrated physics use the logged ones.</p>" if d["logged_traces"] else "")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>hybridev calibration report</title>
 <style>{_CSS}</style></head><body>
@@ -112,7 +109,7 @@ read, {d["n_valid"]} valid, <b>{d["n_rejected"]} rejected</b> ({d["n_rejected_tr
 rows, {d["n_rejected_timeseries"]} time-series trips; listed below). Physics on {traces}.</p>
 <p>Split: {sp["n_train"]} training / {sp["n_test"]} held-out trips{groups}. Seed
 {s["config"]["seed"]}, main level {s["level"]:.0%}.</p>
-<h2>Held-out accuracy and calibration</h2>{hyb_note}
+<h2>Held-out accuracy and calibration</h2>
 {_table(_metrics_table(s))}
 <p class="note">MAPE/MAE/RMSE of the point predictions; coverage: share of held-out trips inside
 the central interval; CRPS: continuous ranked probability score; Spearman and AUROC rank the

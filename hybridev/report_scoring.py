@@ -177,8 +177,7 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         "level": lv,
         "metrics": {"nominal": _point(y, pred["energy_kwh_nominal"].to_numpy(float)),
                     "calibrated": cal, "hybrid": hyb},
-        "labels": {**MODEL_LABELS, "hybrid": MODEL_LABELS["hybrid"] + (
-            ", physics on synthesised traces" if result.logged_traces else "")},
+        "labels": dict(MODEL_LABELS),
         "parameters": post.summary(0.9).reset_index().to_dict(orient="records"),
         "diagnostics": {k: d.get(k) for k in (
             "n_walkers", "n_steps", "burn_in", "thin", "n_samples", "acceptance_mean",
