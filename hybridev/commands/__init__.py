@@ -7,6 +7,7 @@ message.
 """
 
 COMMAND_MODULES = (
+    "hybridev.commands.demo",
     "hybridev.commands.simulate",
     "hybridev.commands.fit",
     "hybridev.commands.predict",
