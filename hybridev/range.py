@@ -58,11 +58,12 @@ rests on few calibration scores, and the factor scales the spread about the
 centre, so the median barely depends on it.
 
 The bands are only as good as the model at the range distance: the networks
-take distance as an input, and a full battery's range (300-700 km) is far
-beyond the paper's 20-200 km training trips. On the structured truth the
-10-90 % band holds the true range 78 % of the time when it is within the
-training distances, 60 % beyond them, and 80 % overall for a model trained
-on 20-700 km trips (``evaluation/range_bands.md``).
+take distance as an input, and a full battery's range (300-700 km) is beyond
+the paper's 20-200 km training trips. The default relative residual target
+(``HybridModel(residual_target="relative")``) carries over to longer trips
+much better than the paper's absolute one; ``evaluation/range_bands.md``
+reports the coverage of the 10-90 % band on a known truth, split by whether
+the true range lies within the training distances.
 
 An unfitted model predicts the physics only (with a
 :class:`~hybridev.model.PhysicsFallbackWarning`): every band collapses to the
