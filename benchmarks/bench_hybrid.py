@@ -2,79 +2,71 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_hybrid.py [--repeats 7]
+    python benchmarks/bench_hybrid.py [--repeats 7] [--single-repeats 300] [--quick] [--out FILE]
 
 Data: ``hybridev.truth.make_dataset(1500, truth="structured", seed=0)`` split
 as in the paper (Sec. III-C): 225 test trips at random, the other 1,275 given
-to ``HybridModel.fit``, which holds out 225 of them for early stopping and
-trains on 1,050.
+to ``fit``.
 
-* Training, on the 2 cores of the machine (no pinning): the paper's network
-  (``n_members=1``), with early stopping and forced to all 200 epochs
-  (``patience=200``), and a 5-member heteroscedastic ensemble, likewise.
-  Times include the physics simulation of the 1,275 trips. (Training runs
-  torch single-threaded by design, see ``hybridev.nn.single_thread``.)
-* Prediction, pinned to one core with one BLAS/OpenMP/torch thread: a batch of
-  10,000 new trips and a single trip, physics (``n_steps=1000``) included,
-  median of repeats after warm-up.
-* Size on disk of a saved model (``model.json`` + ``arrays.npz``).
+Three models, each fitted with early stopping and forced to all 200 epochs
+(``patience=200``):
 
-Targets (issue 3): 10,000 trips < 1 s and one trip < 5 ms on one core;
-training 1,050 trips < 60 s (ensemble of 5 < 90 s) on 2 cores; model <= 98 KB.
-Writes ``benchmarks/results/bench_hybrid.md``.
+* the paper's point model, ``HybridModel(**PAPER_CONFIG)``: one MSE network
+  on the absolute residual, nominal physics; 225 of the 1,275 trips held out
+  for early stopping, 1,050 trained on;
+* 5 heteroscedastic members alone: ``PAPER_CONFIG`` with ``n_members=5,
+  heteroscedastic=True`` (no physics posterior, no conformal step);
+* the default probabilistic model, ``HybridModel()``: emcee physics posterior,
+  5 heteroscedastic members on the relative residual and the split-conformal
+  step (15 % of the trips held out for it; the trip counts of each fit are in
+  the result table).
+
+Measured:
+
+* Training, on the 2 cores of the machine (no pinning): wall time of ``fit``,
+  physics simulation (and for the default the posterior and the conformal
+  step) included. (Training runs torch single-threaded by design, see
+  ``hybridev.nn.single_thread``.)
+* Prediction, pinned to one core with one BLAS/OpenMP/torch thread:
+  ``predict`` on a batch of 10,000 new trips and on a single trip, physics
+  (``n_steps=1000``) included, median of repeats after warm-up.
+* Size on disk of each saved model (``model.json`` + ``arrays.npz``), with the
+  network weights + feature scalers split out of ``arrays.npz``.
+
+Targets (issue 3): 10,000 trips < 1 s and one trip < 5 ms on one core
+(paper network); training 1,050 trips < 60 s (ensemble of 5 < 90 s) on 2
+cores; network + scalers <= 98 kB (the paper's model size). Writes
+``benchmarks/results/bench_hybrid.md``.
 """
 
 from __future__ import annotations
 
-import os
+import sys
+import tempfile
+from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-             "NUMEXPR_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
-    os.environ[_var] = "1"  # before numpy and torch are imported
+import _common as bench  # first: one BLAS/OpenMP thread before numpy and torch load
+import numpy as np
+import pandas as pd
+import torch
 
-import argparse  # noqa: E402
-import datetime as _dt  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import hybridev
+from hybridev import HybridModel, make_trips
+from hybridev.model import PAPER_CONFIG
+from hybridev.persist import ARRAYS_FILE, DOC_FILE
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-import torch  # noqa: E402
-
-import hybridev  # noqa: E402
-from hybridev import HybridModel, make_trips  # noqa: E402
-from hybridev.persist import ARRAYS_FILE, DOC_FILE  # noqa: E402
-from hybridev.truth import make_dataset  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "benchmarks" / "results" / "bench_hybrid.md"
 TARGETS = {"batch_s": 1.0, "single_ms": 5.0, "train_s": 60.0, "train5_s": 90.0,
            "size_kb": 98.0}
 PAPER = {"single_ms": 125.2, "batch_ms_per_trip": 0.24, "size_kb": 98.0}
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def timed(fn, repeats: int, warmup: int = 1) -> np.ndarray:
-    for _ in range(warmup):
-        fn()
-    out = np.empty(repeats)
-    for i in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        out[i] = time.perf_counter() - t0
-    return out
+MODELS = {  # key: (label, constructor settings)
+    "paper": ("paper point model, `HybridModel(**PAPER_CONFIG)`", dict(PAPER_CONFIG)),
+    "ensemble": ("5 heteroscedastic members alone (`PAPER_CONFIG`, `n_members=5`, "
+                 "`heteroscedastic=True`)",
+                 {**PAPER_CONFIG, "n_members": 5, "heteroscedastic": True}),
+    "default": ("default probabilistic model, `HybridModel()` (posterior + 5 members + "
+                "conformal)", {}),
+}
+STOPPING = {"early": ("early stopping", {}), "all": ("all 200 epochs", {"patience": 200})}
 
 
 def mape(y, p) -> float:
@@ -82,157 +74,157 @@ def mape(y, p) -> float:
     return 100.0 * float(np.mean(np.abs(y - p) / y))
 
 
-def fit_timed(train: pd.DataFrame, **kw) -> tuple[HybridModel, float]:
-    t0 = time.perf_counter()
-    m = HybridModel(**kw).fit(train, seed=0)
-    return m, time.perf_counter() - t0
-
-
 def size_on_disk(model: HybridModel, where: Path) -> dict[str, int]:
+    """Bytes of ``model.json``, ``arrays.npz`` and of parts of ``arrays.npz`` (compressed)."""
     model.save(where)
+    parts = bench.npz_entry_sizes(where / ARRAYS_FILE)
+    net = sum(v for k, v in parts.items()
+              if k.startswith("net.") or k in ("feature_mean", "feature_std"))
     return {"json": (where / DOC_FILE).stat().st_size,
-            "npz": (where / ARRAYS_FILE).stat().st_size}
+            "npz": (where / ARRAYS_FILE).stat().st_size,
+            "net_scalers": net,
+            "curves": parts.get("train_loss", 0) + parts.get("val_loss", 0),
+            "extra": sum(v for k, v in parts.items() if k.startswith("extra."))}
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=7, help="repeats of the 10,000-trip batch")
-    ap.add_argument("--single-repeats", type=int, default=300)
-    args = ap.parse_args(argv)
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    args = bench.parse_args(__doc__, argv, name="bench_hybrid", counts={
+        "repeats": (7, 2, "repeats of each 10,000-trip batch"),
+        "single_repeats": (300, 20, "calls of each single-trip prediction")})
+    load = bench.load_average()
 
     # -- training on 2 cores ------------------------------------------------------------
     torch.set_num_threads(2)
-    data = make_dataset(1500, truth="structured", seed=0)
-    test_idx = np.sort(np.random.default_rng(0).permutation(len(data))[:225])
-    test = data.iloc[test_idx]
-    train = data.drop(index=data.index[test_idx])
+    train, test = bench.paper_split()
     runs = {}
-    for name, kw in (("M=1 (paper), early stopping", {}),
-                     ("M=1 (paper), all 200 epochs", {"patience": 200}),
-                     ("M=5 heteroscedastic, early stopping",
-                      {"n_members": 5, "heteroscedastic": True}),
-                     ("M=5 heteroscedastic, all 200 epochs",
-                      {"n_members": 5, "heteroscedastic": True, "patience": 200})):
-        m, sec = fit_timed(train, **kw)
-        out = m.predict(test)
-        runs[name] = (m, sec, mape(test.energy_kwh, out.energy_kwh_pred),
-                      mape(test.energy_kwh, out.energy_kwh_physics))
-        print(f"fit {name}: {sec:.1f} s, {m.fit_info_['n_epochs']} epochs")
-    paper_model = runs["M=1 (paper), early stopping"][0]
-    ens_model = runs["M=5 heteroscedastic, early stopping"][0]
+    for key, (_label, kw) in MODELS.items():
+        for stop, (stop_label, stop_kw) in STOPPING.items():
+            m, sec = bench.clock(
+                lambda kw={**kw, **stop_kw}: HybridModel(**kw).fit(train, seed=0))
+            out = m.predict(test)
+            runs[key, stop] = (m, sec, mape(test.energy_kwh, out.energy_kwh_pred),
+                               mape(test.energy_kwh, out.energy_kwh_physics))
+            print(f"fit {key}, {stop_label}: {sec:.1f} s, {m.fit_info_['n_epochs']} epochs")
+    models = {key: runs[key, "early"][0] for key in MODELS}
 
     # -- size on disk -------------------------------------------------------------------
     with tempfile.TemporaryDirectory() as tmp:
-        size1 = size_on_disk(paper_model, Path(tmp) / "m1")
-        size5 = size_on_disk(ens_model, Path(tmp) / "m5")
-    n_par1 = paper_model.n_parameters_
-    n_par5 = ens_model.n_parameters_ * 5
+        sizes = {key: size_on_disk(m, Path(tmp) / key) for key, m in models.items()}
 
     # -- prediction on one core -----------------------------------------------------------
-    pinning = "not pinned (no sched_setaffinity)"
-    if cpus:
-        os.sched_setaffinity(0, {cpus[0]})
-        pinning = f"pinned to CPU {cpus[0]} (sched_setaffinity)"
+    pinning = bench.pin_one_core()
     torch.set_num_threads(1)
     batch = make_trips(10_000, seed=1)
     one = make_trips(1, seed=2)
-    t_batch = timed(lambda: paper_model.predict(batch), args.repeats)
-    t_batch5 = timed(lambda: ens_model.predict(batch), args.repeats)
-    t_phys = timed(lambda: hybridev.simulate(batch), args.repeats)
-    t_one = timed(lambda: paper_model.predict(one), args.single_repeats, warmup=20)
-    t_one5 = timed(lambda: ens_model.predict(one), args.single_repeats, warmup=20)
-    med = {"batch": float(np.median(t_batch)), "batch5": float(np.median(t_batch5)),
-           "phys": float(np.median(t_phys)), "one": float(np.median(t_one)) * 1e3,
-           "one5": float(np.median(t_one5)) * 1e3}
+    t_batch = {key: bench.timed_cpu(lambda m=m: m.predict(batch), args.repeats)
+               for key, m in models.items()}
+    t_phys = bench.timed_cpu(lambda: hybridev.simulate(batch), args.repeats)
+    t_one = {key: bench.timed_cpu(lambda m=m: m.predict(one), args.single_repeats, warmup=20)
+             for key, m in models.items()}
+    med_batch = {k: float(np.median(wall)) for k, (wall, _) in t_batch.items()}
+    med_one_ms = {k: float(np.median(wall)) * 1e3 for k, (wall, _) in t_one.items()}
 
-    def verdict(ok: bool) -> str:
-        return "met" if ok else "MISSED"
-
-    tr1 = runs["M=1 (paper), all 200 epochs"][1]
-    tr5 = runs["M=5 heteroscedastic, all 200 epochs"][1]
-    kb1 = (size1["json"] + size1["npz"]) / 1000
-    kb5 = (size5["json"] + size5["npz"]) / 1000
-    ok = {"batch": med["batch"] < TARGETS["batch_s"], "one": med["one"] < TARGETS["single_ms"],
+    tr1 = runs["paper", "all"][1]
+    tr5 = runs["ensemble", "all"][1]
+    tr_default = runs["default", "all"][1]
+    kb = {k: {part: b / 1000 for part, b in s.items()} for k, s in sizes.items()}
+    total_kb = {k: s["json"] + s["npz"] for k, s in kb.items()}
+    ok = {"batch": med_batch["paper"] < TARGETS["batch_s"],
+          "one": med_one_ms["paper"] < TARGETS["single_ms"],
           "train": tr1 < TARGETS["train_s"], "train5": tr5 < TARGETS["train5_s"],
-          "size": max(kb1, kb5) <= TARGETS["size_kb"]}
-    def q(t: np.ndarray, scale: float = 1.0, digits: int = 3) -> str:
-        return "-".join(f"{x * scale:.{digits}f}" for x in np.quantile(t, [0.25, 0.75]))
+          "size": kb["paper"]["net_scalers"] <= TARGETS["size_kb"]}
+    v = {k: bench.verdict(x) for k, x in ok.items()}
 
     train_rows = "\n".join(
-        f"| {name} | {sec:.1f} s | {m.fit_info_['n_epochs']} "
-        f"(best {', '.join(str(b) for b in m.fit_info_['best_epoch'])}) | {hyb:.2f} % "
-        f"(physics {phys:.2f} %) |"
-        for name, (m, sec, hyb, phys) in runs.items())
+        f"| {MODELS[key][0]} | {STOPPING[stop][0]} | {sec:.1f} s | {m.fit_info_['n_epochs']} "
+        f"(best {', '.join(str(b) for b in m.fit_info_['best_epoch'])}) | "
+        f"{m.fit_info_['n_train']:,} / {m.fit_info_['n_val']:,} / {m.fit_info_['n_cal']:,} | "
+        f"{hyb:.2f} % (physics {phys:.2f} %) |"
+        for (key, stop), (m, sec, hyb, phys) in runs.items())
+    short = {"paper": "paper point model", "ensemble": "5 members alone",
+             "default": "default probabilistic model"}
+    batch_rows = "\n".join(
+        f"| 10,000 trips, {short[k]} | {bench.median_iqr(wall)} | {np.median(cpu):.3f} s |"
+        for k, (wall, cpu) in t_batch.items())
+    one_rows = "\n".join(
+        f"| single trip, {short[k]} | {bench.median_iqr(wall, 1e3, 'ms', 2)} | "
+        f"{np.median(cpu) * 1e3:.2f} ms |" for k, (wall, cpu) in t_one.items())
+    size_rows = "\n".join(
+        f"| {short[k]} | {models[k].n_parameters_ * models[k].n_members:,} | "
+        f"**{s['net_scalers']:.1f} kB** | {s['curves']:.1f} kB | {s['extra']:.1f} kB | "
+        f"{s['npz']:.1f} kB | {s['json']:.1f} kB | **{total_kb[k]:.1f} kB** |"
+        for k, s in kb.items())
     md = f"""# Benchmark: hybrid model training, prediction and size
 
-Generated by `python benchmarks/bench_hybrid.py --repeats {args.repeats}`; do not edit by hand.
+Generated by `{args.command}`; do not edit by hand.
 
 Data: `make_dataset(1500, truth="structured", seed=0)`; 225 random test trips, 1,275 to
-`HybridModel.fit` (225 held out for early stopping, 1,050 trained on), `seed=0`.
+`fit(..., seed=0)`. The paper's point model is `HybridModel(**PAPER_CONFIG)` (one MSE
+network on the absolute residual, nominal physics); the library default `HybridModel()` is
+the probabilistic model (emcee physics posterior, 5 heteroscedastic members on the relative
+residual, split-conformal step).
 
 ## Training (2 cores available; torch runs single-threaded by design)
 
-Wall time of `HybridModel(...).fit(1,275 trips)`, physics simulation included. Test MAPE
-on the 225 test trips is a sanity check that the timed model is a real fit (the accuracy
-study lives in `evaluation/`).
+Wall time of `fit` on the 1,275 trips, physics simulation included (for the default model
+also the physics posterior and the conformal step). Test MAPE on the 225 test trips is a
+sanity check that the timed model is a real fit (the accuracy study lives in `evaluation/`).
 
-| model | time | epochs | test MAPE |
-|---|---|---|---|
+| model | stopping | time | epochs | trips trained / early stopping / conformal | test MAPE |
+|---|---|---|---|---|---|
 {train_rows}
 
 | target | value |
 |---|---|
-| 1,050 trips x 200 epochs, paper network, < {TARGETS["train_s"]:.0f} s | {tr1:.1f} s: **{verdict(ok["train"])}** |
-| ensemble of 5 x 200 epochs, < {TARGETS["train5_s"]:.0f} s | {tr5:.1f} s: **{verdict(ok["train5"])}** |
+| 1,050 trips x 200 epochs, paper network, < {TARGETS["train_s"]:.0f} s | {tr1:.1f} s: **{v["train"]}** |
+| ensemble of 5 x 200 epochs, < {TARGETS["train5_s"]:.0f} s | {tr5:.1f} s: **{v["train5"]}** |
+| for reference: the whole default fit (posterior + 5 members x 200 epochs + conformal) | {tr_default:.1f} s ({"within" if tr_default < TARGETS["train5_s"] else "over"} the ensemble's {TARGETS["train5_s"]:.0f} s) |
 
 ## Prediction (one core, one thread), physics with `n_steps=1000` included
 
-| quantity | value |
+`predict` (point prediction); for the default model with the posterior-median physics.
+Median wall time after a warm-up (the targets) and median CPU time of the same calls (the
+machine is shared: CPU time is the less disturbed figure).
+
+| call | wall | CPU |
+|---|---|---|
+{batch_rows}
+| 10,000 trips, `simulate` alone | {bench.median_iqr(t_phys[0])} | {np.median(t_phys[1]):.3f} s |
+{one_rows}
+
+| target | value |
 |---|---|
-| 10,000 trips, paper network | **{med["batch"]:.3f} s** (IQR {q(t_batch)} s; {args.repeats} repeats): target < {TARGETS["batch_s"]:.0f} s **{verdict(ok["batch"])}** |
-| of which `simulate` alone | {med["phys"]:.3f} s |
-| 10,000 trips, 5-member ensemble | {med["batch5"]:.3f} s |
-| per trip in the batch | {med["batch"] / 1e4 * 1e3:.3f} ms (paper: {PAPER["batch_ms_per_trip"]} ms in batches of 20) |
-| single trip, paper network | **{med["one"]:.2f} ms** (IQR {q(t_one, 1e3, 2)} ms; {args.single_repeats} calls): target < {TARGETS["single_ms"]:.0f} ms **{verdict(ok["one"])}** (paper: {PAPER["single_ms"]} ms) |
-| single trip, 5-member ensemble | {med["one5"]:.2f} ms |
+| 10,000 trips, paper network, < {TARGETS["batch_s"]:.0f} s | {med_batch["paper"]:.3f} s: **{v["batch"]}** ({med_batch["paper"] / 1e4 * 1e3:.3f} ms per trip; paper: {PAPER["batch_ms_per_trip"]} ms in batches of 20) |
+| single trip, paper network, < {TARGETS["single_ms"]:.0f} ms | {med_one_ms["paper"]:.2f} ms: **{v["one"]}** (paper: {PAPER["single_ms"]} ms) |
 
 ## Size on disk (`model.save`)
 
-`arrays.npz` holds the float32 weights, the float64 feature scalers and the per-epoch loss
-curves (compressed); `model.json` the configuration, vehicle, feature names, target scaler
-and training summary.
+`arrays.npz` (compressed) holds the float32 network weights, the float64 feature scalers,
+the per-epoch loss curves and, for the default model, the physics-posterior draws (float32)
+and the conformal calibration residuals; `model.json` the configuration, vehicle, feature
+names, target scaler (two numbers) and training summary. The part columns are the
+compressed sizes of those entries in `arrays.npz` (the rest of the file is zip headers).
 
-| model | parameters | arrays.npz | model.json | total |
-|---|---|---|---|---|
-| paper network (M=1) | {n_par1:,} | {size1["npz"] / 1000:.1f} kB | {size1["json"] / 1000:.1f} kB | **{kb1:.1f} kB** |
-| 5 heteroscedastic members | {n_par5:,} | {size5["npz"] / 1000:.1f} kB | {size5["json"] / 1000:.1f} kB | **{kb5:.1f} kB** |
+| model | network parameters | network + scalers | loss curves | posterior + conformal | arrays.npz | model.json | total |
+|---|---|---|---|---|---|---|---|
+{size_rows}
 
-Target <= {TARGETS["size_kb"]:.0f} kB (the paper's model size): **{verdict(ok["size"])}**. The
-paper's network on its 11 listed inputs has 3,393 parameters (3,329 with the 10 it
-states), not its "approximately 5,400".
+Target: network + scalers of the paper's model <= {TARGETS["size_kb"]:.0f} kB (the paper's
+model size): {kb["paper"]["net_scalers"]:.1f} kB, **{v["size"]}** (the default model's
+5 members + scalers: {kb["default"]["net_scalers"]:.1f} kB). The whole saved directory of the
+default probabilistic model takes {total_kb["default"]:.1f} kB. The paper's network on its
+11 listed inputs has 3,393 parameters (3,329 with the 10 it states), not its "approximately
+5,400".
 
-## Machine
-
-| | |
-|---|---|
-| CPU | {cpu_model()} |
-| cores visible | {os.cpu_count()}; prediction {pinning} |
-| threads | OMP/MKL/OPENBLAS_NUM_THREADS=1; torch {torch.get_num_threads()} for prediction |
-| load average at start (1/5/15 min) | {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (shared machine: other jobs may inflate times) |
-| Python | {platform.python_version()} ({platform.python_implementation()}) |
-| numpy / pandas / torch | {np.__version__} / {pd.__version__} / {torch.__version__} |
-| hybridev | {hybridev.__version__} |
-| OS | {platform.platform()} |
-| date | {_dt.date.today().isoformat()} |
-"""
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(md)
-    print(f"10k trips {med['batch']:.3f} s, one trip {med['one']:.2f} ms, train {tr1:.1f} s "
-          f"(M=5: {tr5:.1f} s), size {kb1:.1f} / {kb5:.1f} kB: "
+{bench.machine_section(
+    load=load, cores=f"prediction {pinning}", modules=(np, pd, torch),
+    threads=f"{bench.THREADS_NOTE}; torch {torch.get_num_threads()} for prediction")}"""
+    print(f"paper model: 10k trips {med_batch['paper']:.3f} s, one trip "
+          f"{med_one_ms['paper']:.2f} ms, train {tr1:.1f} s, network + scalers "
+          f"{kb['paper']['net_scalers']:.1f} kB; ensemble of 5 train {tr5:.1f} s; default fit "
+          f"{tr_default:.1f} s, {total_kb['default']:.1f} kB on disk: "
           f"{'all targets met' if all(ok.values()) else 'SOME TARGETS MISSED'}")
-    print(f"wrote {OUT.relative_to(ROOT)}")
+    bench.write_result(md, args.out)
     return 0 if all(ok.values()) else 1
 
 

@@ -2,13 +2,14 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_interval.py [--repeats 7]
+    python benchmarks/bench_interval.py [--repeats 7] [--quick] [--out FILE]
 
 Data: ``hybridev.truth.make_dataset(1500, truth="structured", seed=0)``; 225
 test trips at random, the other 1,275 given to ``HybridModel().fit`` (the
 default probabilistic design: emcee physics posterior on the non-calibration
-trips, 5 heteroscedastic members, 191 trips held out for the split-conformal
-step, 163 of the rest for early stopping).
+trips, 5 heteroscedastic members, 15 % of the trips held out for the
+split-conformal step, a share of the rest for early stopping; the counts are
+in the result).
 
 * Fit, on the 2 cores of the machine (no pinning; torch trains single-threaded
   by design): the whole default ``fit`` (posterior + ensemble + conformal),
@@ -29,59 +30,17 @@ trained in < 90 s on 2 cores. Writes ``benchmarks/results/bench_interval.md``.
 
 from __future__ import annotations
 
-import os
+import sys
 
-for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-             "NUMEXPR_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
-    os.environ[_var] = "1"  # before numpy and torch are imported
+import _common as bench  # first: one BLAS/OpenMP thread before numpy and torch load
+import numpy as np
+import pandas as pd
+import torch
 
-import argparse  # noqa: E402
-import datetime as _dt  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+from hybridev import HybridModel, make_trips
+from hybridev.physics_stats import energy_from_stats
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-import torch  # noqa: E402
-
-import hybridev  # noqa: E402
-from hybridev import HybridModel, make_trips  # noqa: E402
-from hybridev.physics_stats import energy_from_stats  # noqa: E402
-from hybridev.truth import make_dataset  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "benchmarks" / "results" / "bench_interval.md"
 TARGETS = {"interval_s": 1.0, "train5_s": 90.0}
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def timed(fn, repeats: int, warmup: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Wall and CPU seconds of ``repeats`` calls after ``warmup`` calls."""
-    for _ in range(warmup):
-        fn()
-    wall, cpu = np.empty(repeats), np.empty(repeats)
-    for i in range(repeats):
-        c0, t0 = time.process_time(), time.perf_counter()
-        fn()
-        wall[i], cpu[i] = time.perf_counter() - t0, time.process_time() - c0
-    return wall, cpu
-
-
-def fit_timed(train: pd.DataFrame, **kw) -> tuple[HybridModel, float]:
-    t0 = time.perf_counter()
-    m = HybridModel(**kw).fit(train, seed=0)
-    return m, time.perf_counter() - t0
 
 
 def coverage(model: HybridModel, test: pd.DataFrame, level: float) -> float:
@@ -91,18 +50,13 @@ def coverage(model: HybridModel, test: pd.DataFrame, level: float) -> float:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=7, help="repeats of each 10,000-trip call")
-    args = ap.parse_args(argv)
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    args = bench.parse_args(__doc__, argv, name="bench_interval", counts={
+        "repeats": (7, 2, "repeats of each 10,000-trip call")})
+    load = bench.load_average()
 
     # -- fit on 2 cores --------------------------------------------------------------------
     torch.set_num_threads(2)
-    data = make_dataset(1500, truth="structured", seed=0)
-    test_idx = np.sort(np.random.default_rng(0).permutation(len(data))[:225])
-    test = data.iloc[test_idx]
-    train = data.drop(index=data.index[test_idx])
+    train, test = bench.paper_split()
     ens = {"n_members": 5, "heteroscedastic": True, "calibrate_physics": False,
            "conformal_fraction": 0.0}
     runs = {}
@@ -110,7 +64,7 @@ def main(argv=None) -> int:
                      ("default fit, all 200 epochs", {"patience": 200}),
                      ("ensemble of 5 alone, early stopping", ens),
                      ("ensemble of 5 alone, all 200 epochs", {**ens, "patience": 200})):
-        m, sec = fit_timed(train, **kw)
+        m, sec = bench.clock(lambda kw=kw: HybridModel(**kw).fit(train, seed=0))
         runs[name] = (m, sec)
         print(f"fit {name}: {sec:.1f} s, {m.fit_info_['n_epochs']} epochs")
     model = runs["default fit (posterior + 5 members + conformal), early stopping"][0]
@@ -118,18 +72,16 @@ def main(argv=None) -> int:
     cov = {lv: coverage(model, test, lv) for lv in (0.5, 0.9)}
 
     # -- prediction on one core -------------------------------------------------------------
-    pinning = "not pinned (no sched_setaffinity)"
-    if cpus:
-        os.sched_setaffinity(0, {cpus[0]})
-        pinning = f"pinned to CPU {cpus[0]} (sched_setaffinity)"
+    pinning = bench.pin_one_core()
     torch.set_num_threads(1)
     batch = make_trips(10_000, seed=1)
     unlabelled = batch.assign(mode=None)
     t = {
-        "interval": timed(lambda: model.predict_interval(batch), args.repeats),
-        "distribution": timed(lambda: model.predict_distribution(batch), args.repeats),
-        "interval_nomode": timed(lambda: model.predict_interval(unlabelled), args.repeats),
-        "predict": timed(lambda: model.predict(batch), args.repeats),
+        "interval": bench.timed_cpu(lambda: model.predict_interval(batch), args.repeats),
+        "distribution": bench.timed_cpu(lambda: model.predict_distribution(batch), args.repeats),
+        "interval_nomode":
+            bench.timed_cpu(lambda: model.predict_interval(unlabelled), args.repeats),
+        "predict": bench.timed_cpu(lambda: model.predict(batch), args.repeats),
     }
     valid = model._validated(batch)
     stats = post.stats_for(valid)
@@ -138,23 +90,18 @@ def main(argv=None) -> int:
     table, _ = model._posterior_physics(valid, 0, 0)
     x = model._features(table)
     parts = {
-        "trip validation (`validate_prediction_trips`)": timed(lambda: model._validated(batch), args.repeats),
+        "trip validation (`validate_prediction_trips`)":
+            bench.timed_cpu(lambda: model._validated(batch), args.repeats),
         "trace synthesis + sufficient statistics (`stats_for`)":
-            timed(lambda: post.stats_for(valid), args.repeats),
+            bench.timed_cpu(lambda: post.stats_for(valid), args.repeats),
         "physics energies, median + 200 draws (`energy_from_stats`)":
-            timed(lambda: energy_from_stats(stats, params), args.repeats),
+            bench.timed_cpu(lambda: energy_from_stats(stats, params), args.repeats),
         "network, 5 members (`_residual_moments`)":
-            timed(lambda: model._residual_moments(x), args.repeats),
+            bench.timed_cpu(lambda: model._residual_moments(x), args.repeats),
     }
     med = {k: (float(np.median(w)), float(np.median(c))) for k, (w, c) in t.items()}
     med_parts = {k: (float(np.median(w)), float(np.median(c))) for k, (w, c) in parts.items()}
     rest = med["interval"][1] - sum(c for _, c in med_parts.values())
-
-    def verdict(ok: bool) -> str:
-        return "met" if ok else "MISSED"
-
-    def q(w: np.ndarray) -> str:
-        return "-".join(f"{v:.3f}" for v in np.quantile(w, [0.25, 0.75]))
 
     tr5 = runs["ensemble of 5 alone, all 200 epochs"][1]
     ok = {"interval": med["interval"][0] < TARGETS["interval_s"],
@@ -168,18 +115,20 @@ def main(argv=None) -> int:
               "interval_nomode": "`predict_interval`, the same trips without `mode` (3 traces each)",
               "predict": "`predict` (point only), 10,000 trips"}
     pred_rows = "\n".join(
-        f"| {labels[k]} | **{w:.3f} s** (IQR {q(t[k][0])} s) | {c:.3f} s |"
+        f"| {labels[k]} | **{w:.3f} s** (IQR {bench.iqr(t[k][0])} s) | {c:.3f} s |"
         for k, (w, c) in med.items())
     part_rows = "\n".join(f"| {k} | {c:.3f} s |" for k, (_, c) in med_parts.items())
     d = post.diagnostics
+    fi = model.fit_info_
     md = f"""# Benchmark: probabilistic hybrid model, fit and intervals
 
-Generated by `python benchmarks/bench_interval.py --repeats {args.repeats}`; do not edit by hand.
+Generated by `{args.command}`; do not edit by hand.
 
 Data: `make_dataset(1500, truth="structured", seed=0)`; 225 random test trips, 1,275 to
-`HybridModel().fit(..., seed=0)` (defaults: emcee physics posterior on the 1,084
-non-calibration trips, 5 heteroscedastic members trained on 921 with 163 for early stopping,
-191 held out for the split-conformal step).
+`HybridModel().fit(..., seed=0)` (defaults: emcee physics posterior on the
+{fi["n_train"] + fi["n_val"]:,} non-calibration trips, 5 heteroscedastic members trained on
+{fi["n_train"]:,} with {fi["n_val"]:,} for early stopping, {fi["n_cal"]:,} held out for the
+split-conformal step).
 
 ## Fit (2 cores available; torch trains single-threaded by design)
 
@@ -193,7 +142,7 @@ Wall time of `fit` on the 1,275 trips, physics included. The physics posterior a
 
 | target | value |
 |---|---|
-| ensemble of 5 x 200 epochs, < {TARGETS["train5_s"]:.0f} s | {tr5:.1f} s: **{verdict(ok["train5"])}** |
+| ensemble of 5 x 200 epochs, < {TARGETS["train5_s"]:.0f} s | {tr5:.1f} s: **{bench.verdict(ok["train5"])}** |
 
 Sanity check that the timed model is a real fit: on the 225 test trips its 90 % intervals
 cover {cov[0.9]:.3f} and its 50 % intervals {cov[0.5]:.3f} (the coverage study lives in
@@ -208,7 +157,7 @@ is shared: CPU time is the less disturbed figure).
 |---|---|---|
 {pred_rows}
 
-Target: `predict_interval` on 10,000 trips < {TARGETS["interval_s"]:.0f} s: **{verdict(ok["interval"])}**.
+Target: `predict_interval` on 10,000 trips < {TARGETS["interval_s"]:.0f} s: **{bench.verdict(ok["interval"])}**.
 
 Breakdown of one `predict_interval` call (CPU time, median):
 
@@ -217,26 +166,13 @@ Breakdown of one `predict_interval` call (CPU time, median):
 {part_rows}
 | the rest (table bookkeeping, mixture moments, conformal bounds) | {rest:.3f} s |
 
-## Machine
-
-| | |
-|---|---|
-| CPU | {cpu_model()} |
-| cores visible | {os.cpu_count()}; prediction {pinning} |
-| threads | OMP/MKL/OPENBLAS_NUM_THREADS=1; torch {torch.get_num_threads()} for prediction |
-| load average at start (1/5/15 min) | {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (shared machine: other jobs may inflate wall times) |
-| Python | {platform.python_version()} ({platform.python_implementation()}) |
-| numpy / pandas / torch | {np.__version__} / {pd.__version__} / {torch.__version__} |
-| hybridev | {hybridev.__version__} |
-| OS | {platform.platform()} |
-| date | {_dt.date.today().isoformat()} |
-"""
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(md)
+{bench.machine_section(
+    load=load, cores=f"prediction {pinning}", modules=(np, pd, torch), times="wall times",
+    threads=f"{bench.THREADS_NOTE}; torch {torch.get_num_threads()} for prediction")}"""
     print(f"predict_interval 10k trips {med['interval'][0]:.3f} s wall "
           f"({med['interval'][1]:.3f} s CPU), ensemble of 5 x 200 epochs {tr5:.1f} s: "
           f"{'all targets met' if all(ok.values()) else 'SOME TARGETS MISSED'}")
-    print(f"wrote {OUT.relative_to(ROOT)}")
+    bench.write_result(md, args.out)
     return 0 if all(ok.values()) else 1
 
 

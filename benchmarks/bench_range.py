@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_range.py [--repeats 7]
+    python benchmarks/bench_range.py [--repeats 7] [--quick] [--out FILE]
 
 Model: ``HybridModel()`` with its defaults (5 heteroscedastic members, emcee
 physics posterior with 200 draws per prediction, conformal calibration),
@@ -20,84 +20,37 @@ torch at one thread), median of ``--repeats`` after one warm-up:
 * of the first: the physics part (``hybridev.range._range_curve``: physics at
   four distances per row and one network pass);
 * one condition row; ``soc_fan`` for one condition with its default 61
-  distances.
+  distances (``--single-repeats`` runs after three warm-ups).
 
 Writes ``benchmarks/results/bench_range.md``.
 """
 
 from __future__ import annotations
 
-import os
+import sys
 
-for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-             "NUMEXPR_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
-    os.environ[_var] = "1"  # before numpy and torch are imported
+import _common as bench  # first: one BLAS/OpenMP thread before numpy and torch load
+import numpy as np
+import pandas as pd
+import torch
 
-import argparse  # noqa: E402
-import datetime as _dt  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+from hybridev import HybridModel, make_trips
+from hybridev.range import _check_conditions, _range_curve, predict_range, soc_fan
+from hybridev.truth import make_dataset
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-import torch  # noqa: E402
-
-import hybridev  # noqa: E402
-from hybridev import HybridModel, make_trips  # noqa: E402
-from hybridev._io import atomic_path  # noqa: E402
-from hybridev.range import _check_conditions, _range_curve, predict_range, soc_fan  # noqa: E402
-from hybridev.truth import make_dataset  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "benchmarks" / "results" / "bench_range.md"
 TARGET_S = 1.0
 N_ROWS, RESERVE = 1000, 0.1
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def timed(fn, repeats: int, warmup: int = 1) -> np.ndarray:
-    for _ in range(warmup):
-        fn()
-    out = np.empty(repeats)
-    for i in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        out[i] = time.perf_counter() - t0
-    return out
-
-
-def fmt(t: np.ndarray, scale: float = 1.0, unit: str = "s", digits: int = 3) -> str:
-    lo, hi = np.quantile(t, [0.25, 0.75]) * scale
-    return (f"**{np.median(t) * scale:.{digits}f} {unit}** (IQR {lo:.{digits}f}-{hi:.{digits}f}"
-            f" {unit}; {len(t)} runs)")
-
-
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=7, help="repeats of each timing")
-    args = ap.parse_args(argv)
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    args = bench.parse_args(__doc__, argv, name="bench_range", counts={
+        "repeats": (7, 2, "repeats of each 1,000-row timing"),
+        "single_repeats": (30, 5, "repeats of each one-row timing")})
+    load = bench.load_average()
+    model, fit_s = bench.clock(
+        lambda: HybridModel().fit(make_dataset(1500, truth="structured", seed=0), seed=0))
 
-    t0 = time.perf_counter()
-    model = HybridModel().fit(make_dataset(1500, truth="structured", seed=0), seed=0)
-    fit_s = time.perf_counter() - t0
-
-    pinning = "not pinned (no sched_setaffinity)"
-    if cpus:
-        os.sched_setaffinity(0, {cpus[0]})
-        pinning = f"pinned to CPU {cpus[0]} (sched_setaffinity)"
+    pinning = bench.pin_one_core()
     torch.set_num_threads(1)
     trips = make_trips(N_ROWS, seed=1)
     cond = trips.drop(columns=["distance_km", "soc_initial"])
@@ -107,21 +60,22 @@ def main(argv=None) -> int:
     budget = (s0 - RESERVE) * model.capacity_kwh
     checked = _check_conditions(cond)
 
-    t_rows = timed(lambda: predict_range(model, cond, soc_initial=s0, soc_reserve=RESERVE),
-                   args.repeats)
-    t_unk = timed(lambda: predict_range(model, unknown, soc_initial=s0, soc_reserve=RESERVE),
-                  args.repeats)
-    t_phys = timed(lambda: _range_curve(model, checked, s0, budget, 0), args.repeats)
-    t_one = timed(lambda: predict_range(model, one, soc_initial=0.8, soc_reserve=RESERVE),
-                  max(args.repeats, 30), warmup=3)
-    t_fan = timed(lambda: soc_fan(model, one, soc_initial=0.8), max(args.repeats, 30), warmup=3)
+    t_rows = bench.timed(
+        lambda: predict_range(model, cond, soc_initial=s0, soc_reserve=RESERVE), args.repeats)
+    t_unk = bench.timed(
+        lambda: predict_range(model, unknown, soc_initial=s0, soc_reserve=RESERVE), args.repeats)
+    t_phys = bench.timed(lambda: _range_curve(model, checked, s0, budget, 0), args.repeats)
+    t_one = bench.timed(lambda: predict_range(model, one, soc_initial=0.8, soc_reserve=RESERVE),
+                        args.single_repeats, warmup=3)
+    t_fan = bench.timed(lambda: soc_fan(model, one, soc_initial=0.8), args.single_repeats,
+                        warmup=3)
     out = predict_range(model, cond, soc_initial=s0, soc_reserve=RESERVE)
     med = float(np.median(t_rows))
-    verdict = "met" if med < TARGET_S else "MISSED"
+    ok = med < TARGET_S
 
     md = f"""# Benchmark: range prediction with bands
 
-Generated by `python benchmarks/bench_range.py --repeats {args.repeats}`; do not edit by hand.
+Generated by `{args.command}`; do not edit by hand.
 
 Model: `HybridModel()` defaults (5 heteroscedastic members, emcee physics posterior with
 {model.n_posterior_draws} draws per prediction, conformal calibration), fitted on
@@ -134,33 +88,20 @@ Conditions: `make_trips({N_ROWS}, seed=1)` without distance, its per-row SoC, re
 
 | call | time |
 |---|---|
-| `predict_range`, {N_ROWS:,} rows, modes known | {fmt(t_rows)} |
-| of which physics (`_range_curve`: 4 anchor distances per row + one network pass) | {fmt(t_phys)} |
-| `predict_range`, {N_ROWS:,} rows, mode unknown (3 traces per anchor) | {fmt(t_unk)} |
-| `predict_range`, 1 row | {fmt(t_one, 1e3, "ms", 1)} |
-| `soc_fan`, 1 condition, 61 distances | {fmt(t_fan, 1e3, "ms", 1)} |
+| `predict_range`, {N_ROWS:,} rows, modes known | {bench.median_iqr(t_rows)} |
+| of which physics (`_range_curve`: 4 anchor distances per row + one network pass) | {bench.median_iqr(t_phys)} |
+| `predict_range`, {N_ROWS:,} rows, mode unknown (3 traces per anchor) | {bench.median_iqr(t_unk)} |
+| `predict_range`, 1 row | {bench.median_iqr(t_one, 1e3, "ms", 1)} |
+| `soc_fan`, 1 condition, 61 distances | {bench.median_iqr(t_fan, 1e3, "ms", 1)} |
 
-Target (issue 5): {N_ROWS:,} condition rows in < {TARGET_S:g} s: {med:.3f} s, **{verdict}**.
+Target (issue 5): {N_ROWS:,} condition rows in < {TARGET_S:g} s: {med:.3f} s, **{bench.verdict(ok)}**.
 
-## Machine
-
-| | |
-|---|---|
-| CPU | {cpu_model()} |
-| cores visible | {len(cpus) or os.cpu_count()}; timings {pinning} |
-| threads | OMP/MKL/OPENBLAS_NUM_THREADS=1; torch {torch.get_num_threads()} |
-| load average at start (1/5/15 min) | {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (shared machine: other jobs may inflate times) |
-| Python | {platform.python_version()} ({platform.python_implementation()}) |
-| numpy / pandas / torch | {np.__version__} / {pd.__version__} / {torch.__version__} |
-| hybridev | {hybridev.__version__} |
-| OS | {platform.platform()} |
-| date | {_dt.date.today().isoformat()} |
-"""
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(OUT) as tmp:
-        tmp.write_text(md, encoding="utf-8")
+{bench.machine_section(
+    load=load, cores=f"timings {pinning}", modules=(np, pd, torch),
+    threads=f"{bench.THREADS_NOTE}; torch {torch.get_num_threads()}")}"""
     print(md)
-    return 0
+    bench.write_result(md, args.out)
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
