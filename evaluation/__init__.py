@@ -1,0 +1,1 @@
+"""Runnable evaluation scripts (not part of the library; never imported by ``hybridev``)."""
