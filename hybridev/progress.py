@@ -20,6 +20,8 @@ class _Bar(tqdm):
 def progress_bar(total: int, *, desc: str, unit: str = "it", quiet: bool = False
                  ) -> Iterator[_Bar]:
     """A tqdm bar with ``update_to(done)``; silent when ``quiet``."""
-    with _Bar(total=total, desc=desc, unit=unit, disable=quiet, mininterval=0.5,
+    # disable=None: tqdm switches itself off when stderr is not a terminal (CI logs).
+    with _Bar(total=total, desc=desc, unit=unit, disable=True if quiet else None,
+              mininterval=0.5,
               leave=False) as bar:
         yield bar
