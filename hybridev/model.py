@@ -55,7 +55,7 @@ from .params import PROFILES, DrivingProfile, VehicleParams
 from .persist import load_model, save_model
 from .physics_stats import STAT_PARAMS, energy_from_stats, trip_stats
 from .predictive import soc_from_energy
-from .trips import simulate
+from .trips import simulate, with_physics_columns
 from .uncertainty import ProbabilisticMixin
 from .validation import TRIP_RULES, check_table
 
@@ -83,18 +83,6 @@ _PREDICT_BLOCK_ROWS = 65_536
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
 _MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
-
-
-def _physics_table(trips: pd.DataFrame, energy_kwh: np.ndarray, max_speed_kmh: np.ndarray,
-                   capacity_kwh: float) -> pd.DataFrame:
-    """``trips`` plus simulate's physics columns from given energies and top speeds."""
-    out = trips.copy()
-    out["energy_kwh_physics"] = energy_kwh
-    out["soc_final_physics"] = np.clip(
-        out["soc_initial"].to_numpy(float) - energy_kwh / capacity_kwh, 0.0, 1.0)
-    out["max_speed_kmh"] = max_speed_kmh
-    out["kwh_per_km_physics"] = energy_kwh / out["distance_km"].to_numpy(float)
-    return out
 
 
 def as_traces(timeseries) -> LoggedTraces | None:
@@ -377,7 +365,7 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                 else "normal"
             st = trip_stats(t, self._vehicle(), traces=traces, n_steps=int(self.n_steps),
                             seed=int(self.physics_seed), missing_mode=mm)
-            return _physics_table(t, energy_from_stats(st), st.max_speed_kmh,
+            return with_physics_columns(t, energy_from_stats(st), st.max_speed_kmh,
                                   self._vehicle().battery_capacity_kwh)
         modes = normalize_modes(trips.get("mode"), len(trips))
         out = simulate(trips.assign(mode=physics_modes(modes)), self._vehicle(),

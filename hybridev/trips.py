@@ -40,7 +40,8 @@ from .physics import (
 )
 from .validation import validate_trips
 
-__all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces"]
+__all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces",
+           "with_physics_columns"]
 
 BLOCK_TRIPS = 128
 """Most trips simulated per block (bounds memory and keeps the working arrays
@@ -183,12 +184,34 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
         vmax[sl] = v.max(axis=1) * 3.6
         if progress is not None:
             progress(min(sl.stop, n))
-    out = t.copy()
+    return with_physics_columns(t, energy, vmax, veh.battery_capacity_kwh)
+
+
+def with_physics_columns(trips: pd.DataFrame, energy_kwh, max_speed_kmh,
+                         capacity_kwh: float) -> pd.DataFrame:
+    """A copy of ``trips`` with :func:`simulate`'s four physics columns.
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame
+        Trip table with ``soc_initial`` and ``distance_km``.
+    energy_kwh : array_like, shape (n_trips,), kWh
+    max_speed_kmh : array_like, shape (n_trips,), km/h
+    capacity_kwh : float, kWh
+
+    Returns
+    -------
+    pandas.DataFrame
+        With ``energy_kwh_physics``, ``soc_final_physics`` (``s0 - E/C``
+        clipped to [0, 1]), ``max_speed_kmh`` and ``kwh_per_km_physics``.
+    """
+    energy = np.asarray(energy_kwh, dtype=float)
+    out = trips.copy()
     out["energy_kwh_physics"] = energy
     out["soc_final_physics"] = np.clip(
-        t["soc_initial"].to_numpy(float) - energy / veh.battery_capacity_kwh, 0.0, 1.0)
-    out["max_speed_kmh"] = vmax
-    out["kwh_per_km_physics"] = energy / t["distance_km"].to_numpy(float)
+        out["soc_initial"].to_numpy(float) - energy / capacity_kwh, 0.0, 1.0)
+    out["max_speed_kmh"] = max_speed_kmh
+    out["kwh_per_km_physics"] = energy / out["distance_km"].to_numpy(float)
     return out
 
 

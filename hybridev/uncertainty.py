@@ -61,6 +61,7 @@ from .conformal import NormalizedConformal
 from .physics_posterior import PhysicsPosterior
 from .physics_stats import energy_from_stats
 from .predictive import EnergyDistribution, soc_from_energy
+from .trips import with_physics_columns
 
 __all__ = ["KEEP_POSTERIOR_DRAWS", "ProbabilisticMixin"]
 
@@ -105,13 +106,7 @@ class ProbabilisticMixin:
         if stats.marginalised:
             starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
             vmax = np.maximum.reduceat(vmax, starts)
-        out = trips.copy()
-        cap = self._vehicle().battery_capacity_kwh
-        out["energy_kwh_physics"] = e_med
-        out["soc_final_physics"] = np.clip(out["soc_initial"].to_numpy(float) - e_med / cap,
-                                           0.0, 1.0)
-        out["max_speed_kmh"] = vmax
-        out["kwh_per_km_physics"] = e_med / out["distance_km"].to_numpy(float)
+        out = with_physics_columns(trips, e_med, vmax, self._vehicle().battery_capacity_kwh)
         return out, e_draws
 
     def _fit_posterior(self, measured: pd.DataFrame, seed: int, traces=None) -> None:
