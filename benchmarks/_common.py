@@ -125,7 +125,7 @@ def write_result(text: str, out: Path | None) -> None:
     if out is None:
         print("quick run: result not written (give --out FILE to write it)")
         return
-    from hybridev._io import atomic_path
+    from hybridev.core.fileio import atomic_path
 
     with atomic_path(out) as tmp:
         tmp.write_text(text, encoding="utf-8")
@@ -263,7 +263,7 @@ def paper_split(n_test: int = 225):
     The paper's split (Sec. III-C): ``n_test`` test trips drawn at random
     (``default_rng(0)``), the other 1,275 for ``fit``.
     """
-    from hybridev.truth import make_dataset
+    from hybridev.physics.truth import make_dataset
 
     data = make_dataset(1500, truth="structured", seed=0)
     test_idx = np.sort(np.random.default_rng(0).permutation(len(data))[:n_test])

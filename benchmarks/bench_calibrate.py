@@ -6,7 +6,7 @@ Run from the repository root::
 
 Workload: 1,000 trips of the paper's design (``make_trips(1000, seed=0)``) with
 energies from the exact physics at perturbed parameters plus 5 % relative noise
-(``hybridev.calibrate.simulate_measured``), then
+(``hybridev.bayes.sampler.simulate_measured``), then
 ``calibrate_physics(measured)`` with its defaults: 5 physics parameters plus
 the noise, 32 walkers, adaptive chain length (>= 50 integrated autocorrelation
 times after burn-in). Timed end to end (trace statistics, MAP, sampling),
@@ -28,8 +28,8 @@ import numpy as np
 import pandas as pd
 
 from hybridev import make_trips
-from hybridev.calibrate import calibrate_physics, simulate_measured
-from hybridev.physics_stats import trip_stats
+from hybridev.bayes.sampler import calibrate_physics, simulate_measured
+from hybridev.physics.stats_build import trip_stats
 
 N_TRIPS = 1000
 TARGET_S = 60.0

@@ -7,7 +7,7 @@ Run from the repository root::
 Writes ``benchmarks/results/bench_charging.md``. One vehicle, a week of
 672 quarter-hour slots with a night / day / evening-peak tariff and 3 or 4
 trips a day. The energy distribution is an
-:class:`hybridev.predictive.EnergyDistribution` shaped like the hybrid
+:class:`hybridev.learning.predictive.EnergyDistribution` shaped like the hybrid
 model's (200 physics-posterior draws shared by all trips, 5 ensemble members,
 per-trip noise); the model's own ``predict_distribution`` time is not
 included. Times are wall-clock with one BLAS/OpenMP thread (the process is
@@ -29,8 +29,8 @@ import numpy as np
 import pandas as pd
 import scipy
 
-from hybridev.charging import plan_charging_from_distribution
-from hybridev.predictive import EnergyDistribution
+from hybridev.apps.charging.plan import plan_charging_from_distribution
+from hybridev.learning.predictive import EnergyDistribution
 
 T0 = pd.Timestamp("2024-03-04")
 CAPACITY_KWH = 60.0

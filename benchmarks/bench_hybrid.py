@@ -4,7 +4,7 @@ Run from the repository root::
 
     python benchmarks/bench_hybrid.py [--repeats 7] [--single-repeats 300] [--quick] [--out FILE]
 
-Data: ``hybridev.truth.make_dataset(1500, truth="structured", seed=0)`` split
+Data: ``hybridev.physics.truth.make_dataset(1500, truth="structured", seed=0)`` split
 as in the paper (Sec. III-C): 225 test trips at random, the other 1,275 given
 to ``fit``.
 
@@ -26,7 +26,7 @@ Measured:
 * Training, on the 2 cores of the machine (no pinning): wall time of ``fit``,
   physics simulation (and for the default the posterior and the conformal
   step) included. (Training runs torch single-threaded by design, see
-  ``hybridev.nn.single_thread``.)
+  ``hybridev.learning.nn.single_thread``.)
 * Prediction, pinned to one core with one BLAS/OpenMP/torch thread:
   ``predict`` on a batch of 10,000 new trips and on a single trip, physics
   (``n_steps=1000``) included, median of repeats after warm-up.
@@ -52,8 +52,8 @@ import torch
 
 import hybridev
 from hybridev import HybridModel, make_trips
-from hybridev.model import PAPER_CONFIG
-from hybridev.persist import ARRAYS_FILE, DOC_FILE
+from hybridev.learning.model import PAPER_CONFIG
+from hybridev.learning.persist import ARRAYS_FILE, DOC_FILE
 
 TARGETS = {"batch_s": 1.0, "single_ms": 5.0, "train_s": 60.0, "train5_s": 90.0,
            "size_kb": 98.0}

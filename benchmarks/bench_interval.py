@@ -4,7 +4,7 @@ Run from the repository root::
 
     python benchmarks/bench_interval.py [--repeats 7] [--quick] [--out FILE]
 
-Data: ``hybridev.truth.make_dataset(1500, truth="structured", seed=0)``; 225
+Data: ``hybridev.physics.truth.make_dataset(1500, truth="structured", seed=0)``; 225
 test trips at random, the other 1,275 given to ``HybridModel().fit`` (the
 default probabilistic design: emcee physics posterior on the non-calibration
 trips, 5 heteroscedastic members, 15 % of the trips held out for the
@@ -38,7 +38,7 @@ import pandas as pd
 import torch
 
 from hybridev import HybridModel, make_trips
-from hybridev.physics_stats import energy_from_stats
+from hybridev.physics.stats import energy_from_stats
 
 TARGETS = {"interval_s": 1.0, "train5_s": 90.0}
 

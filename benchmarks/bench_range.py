@@ -1,4 +1,4 @@
-"""Benchmark: speed of range prediction with bands (``hybridev.range``).
+"""Benchmark: speed of range prediction with bands (``hybridev.apps.range``).
 
 Run from the repository root::
 
@@ -6,7 +6,7 @@ Run from the repository root::
 
 Model: ``HybridModel()`` with its defaults (5 heteroscedastic members, emcee
 physics posterior with 200 draws per prediction, conformal calibration),
-fitted with seed 0 on ``hybridev.truth.make_dataset(1500, truth="structured",
+fitted with seed 0 on ``hybridev.physics.truth.make_dataset(1500, truth="structured",
 seed=0)`` (set-up, not timed as part of the target).
 
 Timed on one core (pinned with ``sched_setaffinity``; OMP/MKL/OpenBLAS and
@@ -17,7 +17,7 @@ torch at one thread), median of ``--repeats`` after one warm-up:
   (0.1, 0.5, 0.9) -- the target of issue 5: < 1 s;
 * the same rows with the mode unknown (physics marginalised over the three
   profiles, so three traces per anchor);
-* of the first: the physics part (``hybridev.range._range_curve``: physics at
+* of the first: the physics part (``hybridev.apps.range._range_curve``: physics at
   four distances per row and one network pass);
 * one condition row; ``soc_fan`` for one condition with its default 61
   distances (``--single-repeats`` runs after three warm-ups).
@@ -35,8 +35,9 @@ import pandas as pd
 import torch
 
 from hybridev import HybridModel, make_trips
-from hybridev.range import _check_conditions, _range_curve, predict_range, soc_fan
-from hybridev.truth import make_dataset
+from hybridev.apps.range import _check_conditions, _range_curve, predict_range
+from hybridev.apps.range_plot import soc_fan
+from hybridev.physics.truth import make_dataset
 
 TARGET_S = 1.0
 N_ROWS, RESERVE = 1000, 0.1

@@ -89,7 +89,7 @@ output table.
 | scaling: 15,000 trips | {scale[1][1] * 1e3:.1f} ms ({scale[1][1] / scale[1][0] * 1e6:.1f} µs per trip) |
 
 Memory stays bounded for any number of trips: traces are built and reduced in blocks of
-at most `hybridev.trips.BLOCK_TRIPS` = {hybridev.trips.BLOCK_TRIPS} trips (fewer for long
+at most `hybridev.physics.trips.BLOCK_TRIPS` = {hybridev.physics.trips.BLOCK_TRIPS} trips (fewer for long
 traces), so peak memory grows with the output table, not with `n_trips * n_steps`.
 
 {bench.machine_section(load=load, cores=f"benchmark {pinning}", modules=(np, pd))}"""

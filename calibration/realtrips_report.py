@@ -10,7 +10,7 @@ Builds the measured-trip table and the 1 Hz time series of the 104 real trips
 (see that folder's README; the data are never copied into the repository),
 then
 
-1. runs :func:`hybridev.report.calibration_report` (the ``hybridev calibrate``
+1. runs :func:`hybridev.apps.report.build.calibration_report` (the ``hybridev calibrate``
    pipeline) on one split that holds out whole driving sessions
    (``session_group``, 20 % of them), writing the HTML report to
    ``--report-dir`` (default: a temporary directory);
@@ -46,10 +46,10 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from realtrips_physics import LOGGED, PARAMS, SOC_INITIAL, VEHICLE
 
-from hybridev._io import atomic_path
-from hybridev.logs import MeasuredTrips, measured_from_frames
-from hybridev.report import calibration_report, holdout_evaluation, score_holdout
-from hybridev.report_scoring import jsonable
+from hybridev.apps.report.build import calibration_report, holdout_evaluation, score_holdout
+from hybridev.apps.report.scoring import jsonable
+from hybridev.core.fileio import atomic_path
+from hybridev.data.logs import MeasuredTrips, measured_from_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "realtrips"
@@ -322,13 +322,13 @@ Full HTML report: {html}.
 
 ## Set-up
 
-* **Pipeline**: `hybridev.report.calibration_report`, the library function behind
+* **Pipeline**: `hybridev.apps.report.build.calibration_report`, the library function behind
   `hybridev calibrate`, on the measured-trip table built from `trips.csv` (`trip_id`,
   `session_group`, `distance_km`, `avg_speed_kmh` = `mean_speed_kmh`, `temperature_c` =
   `amb_temp_mean_c`, `energy_kwh` = `e_batt_net_kwh`, `hour` from `start_time_local`,
   `soc_initial` = {SOC_INITIAL} (an assumption: the source has no SoC), `mode` = none) and the
   1 Hz time series (`speed_kmh`, `elevation_m`, `amb_temp_c`), read by
-  `hybridev.logs.measured_from_frames`.
+  `hybridev.data.logs.measured_from_frames`.
 * **Rejected rows**: {d['n_rejected']} ({d['n_rejected_trip_rows']} trip rows,
   {d['n_rejected_timeseries']} traces), each with its reason; they are the trips the source
   flags `no_start_datetime`: a partly missing `hour` is rejected by validation. The variant

@@ -8,9 +8,9 @@ Set-up (every number in the output comes from this script):
 
 * The probabilistic ``HybridModel()`` is fitted on ``make_dataset(1500,
   truth="structured", seed=0)`` (the demo's model, ``physics_seed=0``).
-* Schedules: :func:`hybridev.demo.example_schedule` (a week of commutes,
+* Schedules: :func:`hybridev.apps.demo.example_schedule` (a week of commutes,
   errands and a long weekend trip) for several seeds, with the time-of-use
-  :func:`hybridev.demo.example_tariff`, a 7.4 kW charger, starting SoC 0.5,
+  :func:`hybridev.apps.demo.example_tariff`, a 7.4 kW charger, starting SoC 0.5,
   ``soc_min`` 0.1, and risk levels 0.05 and 0.10.
 * Each schedule gets two plans: the risk-aware plan
   (:func:`hybridev.plan_charging`) and the risk-neutral plan on mean energies.
@@ -21,7 +21,7 @@ Set-up (every number in the output comes from this script):
   2. from the **data-generating truth**. The structured truth is
      ``E* = E_p (1 + S(x)) (1 + eta)`` with i.i.d. ``eta ~ N(0, 0.035^2)``
      per trip. Its mean ``E_p (1 + S)`` is
-     :func:`hybridev.truth.oracle_energy_kwh` on the schedule's trips (same
+     :func:`hybridev.physics.oracle.oracle_energy_kwh` on the schedule's trips (same
      physics traces as the model). ``S`` includes an internal-resistance term
      that depends on the trip's average SoC, which depends on the plan; it is
      evaluated at the risk-aware plan's median departure SoC, an
@@ -42,10 +42,11 @@ import pandas as pd
 
 import hybridev
 from hybridev import HybridModel, make_dataset, plan_charging
-from hybridev.charging import evaluate_charging
-from hybridev.demo import example_schedule, example_tariff
-from hybridev.predictive import EnergyDistribution
-from hybridev.truth import STRUCTURED_NOISE_SIGMA, oracle_energy_kwh
+from hybridev.apps.charging.plan import evaluate_charging
+from hybridev.apps.demo import example_schedule, example_tariff
+from hybridev.learning.predictive import EnergyDistribution
+from hybridev.physics.oracle import oracle_energy_kwh
+from hybridev.physics.truth import STRUCTURED_NOISE_SIGMA
 
 OUT = Path(__file__).resolve().parent / "charging_risk.md"
 SEEDS = (0, 1, 2, 3, 4)

@@ -36,7 +36,7 @@ from hybridev import (
     trip_traces,
     wheel_power_kw,
 )
-from hybridev.physics import aux_power_kw
+from hybridev.physics.climate import aux_power_kw
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT_MD = ROOT / "evaluation" / "physics_reproduction.md"
@@ -519,7 +519,7 @@ noise aggressive gives {literal_nonoise:.3f}), 100 km at 90 km/h, 20 °C:
 The literal rule gives {literal['aggressive']:.2f} kWh/km for aggressive driving
 ({rel_lit} vs the paper's own 0.238), so the paper's tables cannot have come from it.
 We build traces whose acceleration *is* the derivative of speed
-(`hybridev.kinematics`): whole accelerate-cruise-brake cycles spending the profile's phase
+(`hybridev.physics.kinematics`): whole accelerate-cruise-brake cycles spending the profile's phase
 fractions, `|a| <= a_max`, distance and mean speed exact, start speed = end speed.
 
 ### 5.2 Trap 2: braking counted twice
@@ -572,7 +572,7 @@ auxiliary power, as in the paper's parameter table.
 
 With `N = {N_STEPS}` intervals, a long slow trip has `dt` of tens of seconds and cannot
 resolve 30-60 s cycles. Cycles are then lengthened to at least
-{hybridev.kinematics.MIN_STEPS_PER_CYCLE} samples, and swings are capped by `a_max` and the
+{hybridev.physics.kinematics.MIN_STEPS_PER_CYCLE} samples, and swings are capped by `a_max` and the
 mean speed, so the achieved PKE falls below target:
 
 {pke_txt}

@@ -1,4 +1,4 @@
-"""Do the range bands of ``hybridev.range.predict_range`` hold on a known truth?
+"""Do the range bands of ``hybridev.apps.range.predict_range`` hold on a known truth?
 
 Run from the repository root::
 
@@ -9,10 +9,10 @@ every number in them is computed here.
 
 Set-up
 ------
-* **Truth.** ``hybridev.truth``'s structured benchmark: a trip of length
+* **Truth.** ``hybridev.physics.truth``'s structured benchmark: a trip of length
   ``r`` uses ``E*(r) = E_p(r) (1 + S(r)) max(1 + eta, 0.05)`` with ``E_p`` the
   physics of :func:`hybridev.simulate` (``n_steps=1000``, seed 0, trace keyed by
-  ``trip_id``), ``S`` the smooth effects of :func:`hybridev.truth.effect_breakdown`
+  ``trip_id``), ``S`` the smooth effects of :func:`hybridev.physics.truth.effect_breakdown`
   and ``eta ~ N(0, 0.03^2)``.
 * **Model.** ``HybridModel()`` with its defaults (5 heteroscedastic members,
   emcee physics posterior, split-conformal calibration on 15 % of the trips),
@@ -53,17 +53,16 @@ from matplotlib.figure import Figure
 
 import hybridev
 from hybridev import HybridModel, make_trips, simulate
-from hybridev._io import atomic_path
-from hybridev.range import (
+from hybridev.apps.range import (
     _check_conditions,
     _interp_log,
     _range_curve,
-    plot_soc_fan,
     predict_range,
     quantile_column,
-    soc_fan,
 )
-from hybridev.truth import (
+from hybridev.apps.range_plot import plot_soc_fan, soc_fan
+from hybridev.core.fileio import atomic_path
+from hybridev.physics.truth import (
     MIN_NOISE_FACTOR,
     STRUCTURED_NOISE_SIGMA,
     effect_breakdown,

@@ -39,8 +39,8 @@ from hybridev import (
     oracle_energy_kwh,
     simulate,
 )
-from hybridev.features import FEATURE_NAMES
-from hybridev.model import PAPER_CONFIG
+from hybridev.learning.features import FEATURE_NAMES
+from hybridev.learning.model import PAPER_CONFIG
 
 __all__ = [
     "ABLATIONS",
@@ -58,7 +58,7 @@ __all__ = [
 ]
 
 PAPER_NET = dict(PAPER_CONFIG)
-"""The paper's point model (``hybridev.model.PAPER_CONFIG``): one MSE network on the absolute
+"""The paper's point model (``hybridev.learning.model.PAPER_CONFIG``): one MSE network on the absolute
 residual ``E* - E_p`` (kWh), no physics posterior, no ensemble, no conformal step."""
 PAPER_NET_RELATIVE = {**PAPER_NET, "residual_target": "relative"}
 """The paper's network on the library's default target, the relative residual."""
@@ -317,7 +317,7 @@ def observed_soc_trips(truth: str, n_trips: int = 150, seed: int = 0) -> pd.Data
     ``N(0, 0.035^2)``) from ``default_rng([seed, 12])``: the formula of
     ``make_dataset``, applied to custom trips.
     """
-    from hybridev.truth import MIN_NOISE_FACTOR, PAPER_NOISE_SIGMAS, STRUCTURED_NOISE_SIGMA
+    from hybridev.physics.truth import MIN_NOISE_FACTOR, PAPER_NOISE_SIGMAS, STRUCTURED_NOISE_SIGMA
 
     rng = np.random.default_rng([seed, 11])
     trips = pd.DataFrame({"trip_id": 60_000 + np.arange(n_trips),

@@ -15,9 +15,9 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from hybridev import LinearBaseline, VehicleParams
-from hybridev._io import atomic_path
-from hybridev.baselines import PAPER_CONSTANT_RATE_KWH_PER_KM
-from hybridev.truth import noise_floor_pct
+from hybridev.core.fileio import atomic_path
+from hybridev.learning.baselines import PAPER_CONSTANT_RATE_KWH_PER_KM
+from hybridev.physics.oracle import noise_floor_pct
 
 from .repro_experiments import LC_MODELS
 

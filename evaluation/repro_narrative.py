@@ -10,8 +10,9 @@ import numpy as np
 
 import hybridev
 from hybridev import LinearBaseline, effect_breakdown
-from hybridev.nn import n_parameters
-from hybridev.truth import PAPER_NOISE_SIGMAS, noise_floor_pct, noise_sigma, oracle_factor
+from hybridev.learning.nn import n_parameters
+from hybridev.physics.oracle import noise_floor_pct, oracle_factor
+from hybridev.physics.truth import PAPER_NOISE_SIGMAS, noise_sigma
 
 from . import repro_tables as T
 from .repro_experiments import ABLATIONS, LC_SEED, SPLIT_STREAM
@@ -191,7 +192,7 @@ curve, {n_rep} training replicates on a fixed {cfg.lc_test}-trip test set.
 * **Paper truth** (the paper's own noise model): no model can get near the paper's 0.8 %.
   The floor is {floor.get(p, 0):.2f} % and every model that uses the physics sits on it;
   the hybrid cannot improve on physics-only because there is nothing to learn (trap 3 below).
-* **Structured truth** (our learnable benchmark, `hybridev.truth`): the hybrid removes most
+* **Structured truth** (our learnable benchmark, `hybridev.physics.truth`): the hybrid removes most
   of the learnable error; what is left is the i.i.d. noise ({100 * noise_sigma(s):.1f} %,
   floor {floor[s]:.2f} %).
 * **Data efficiency**: {"the hybrid beats pure ML at every training size up to 200 trips in every replicate, on both truths" if all(v[1] for v in lc_text.values()) else "see Section 6 for where the hybrid does not beat pure ML"}.
@@ -203,7 +204,7 @@ eps_weather)` with independent `N(0, sd)` terms of sd {", ".join(f"{v:g}" for v 
 (Sec. III-C). Their sum has sd `sqrt(0.0134)` = **{100 * noise_sigma(p):.1f} %**, independent
 of every input. The best any model can do is predict `c E_p` (`c` = {oracle_factor(p):.4f},
 the MAPE-optimal multiplier), whose expected MAPE is `E|X - c| / X` with `X = 1 + eta`:
-**{floor.get(p, 0):.2f} %** (`hybridev.truth.noise_floor_pct`, by quadrature). The paper's
+**{floor.get(p, 0):.2f} %** (`hybridev.physics.oracle.noise_floor_pct`, by quadrature). The paper's
 0.8 % hybrid and even its 2.1 % physics-only MAPE are therefore impossible on its own data:
 physics-only *is* the oracle up to the factor `c`, and its MAPE is the floor. We report the
 honest numbers for this truth (`truth="paper"`) and add a second, learnable truth

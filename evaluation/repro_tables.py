@@ -3,9 +3,9 @@
 Pure functions of the results of :mod:`evaluation.repro_experiments` (no model is
 fitted here). Conventions: MAPE in %, MAE/RMSE in kWh; "a ± b" is the mean and
 the sample standard deviation over seeds (replicates) unless a table says
-pooled; "oracle" is the MAPE-optimal oracle of :mod:`hybridev.truth` on the
+pooled; "oracle" is the MAPE-optimal oracle of :mod:`hybridev.physics.truth` on the
 same test trips (the floor on those trips) and "floor" its expectation
-:func:`hybridev.truth.noise_floor_pct`.
+:func:`hybridev.physics.oracle.noise_floor_pct`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pandas as pd
 
 from hybridev import VehicleParams
 from hybridev.metrics import mae, mape, rmse
-from hybridev.truth import noise_floor_pct
+from hybridev.physics.oracle import noise_floor_pct
 
 from .repro_experiments import ABLATIONS, LC_MODELS, MAIN_MODELS
 

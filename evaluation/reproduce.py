@@ -37,7 +37,7 @@ from evaluation import repro_narrative as N  # noqa: E402
 from evaluation import repro_tables as T  # noqa: E402
 from evaluation.repro_timing import machine_info, time_models  # noqa: E402
 from hybridev import make_dataset, simulate  # noqa: E402
-from hybridev._io import atomic_path  # noqa: E402
+from hybridev.core.fileio import atomic_path  # noqa: E402
 
 __all__ = ["main", "run_experiments"]
 

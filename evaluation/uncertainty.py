@@ -13,7 +13,7 @@ Experiments (details in the modules' docstrings):
 1. ``uq_experiments``: posterior-only, ensemble-only and combined predictive
    intervals, before and after split conformal, against a constant-width
    conformal interval around the paper's point network, on both truths of
-   :mod:`hybridev.truth`; paper protocol (1,500 trips: 1,275 fit, 225 test) over
+   :mod:`hybridev.physics.truth`; paper protocol (1,500 trips: 1,275 fit, 225 test) over
    several seeds, plus a large fresh test set per seed with new trip keys
    (``uq_data``).
 2. ``uq_experiments.run_shift``: train at 20/32 degC, test at -5 degC; train
@@ -43,7 +43,7 @@ from uq_recovery import run_recovery, sampler_check
 
 import hybridev
 from hybridev import VehicleParams
-from hybridev._io import atomic_path
+from hybridev.core.fileio import atomic_path
 
 ROOT = Path(__file__).resolve().parents[1]
 FULL = {"seeds": 10, "n_fresh": 5000, "shift_seeds": 5, "recovery_seeds": 200}

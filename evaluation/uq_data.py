@@ -9,7 +9,7 @@ Part of ``evaluation/uncertainty.py`` (not imported by the library).
 * A fresh test set must not reuse those traces: its trips come from
   ``make_trips(n, seed=FRESH_BASE + s)`` with ``trip_id`` offset by
   :data:`TRIP_ID_OFFSET`, and its energies are built by :func:`truth_energy`,
-  which repeats ``hybridev.truth.make_dataset``'s recipe (``E* = max(E_p (1 + S), 0)
+  which repeats ``hybridev.physics.truth.make_dataset``'s recipe (``E* = max(E_p (1 + S), 0)
   max(1 + eta, MIN_NOISE_FACTOR)``) with trace seed ``s`` and an independent noise
   stream. :func:`check_recipe` asserts that the recipe reproduces
   ``make_dataset`` bit for bit on the training data of every seed.
@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev import VehicleParams, make_trips, simulate
-from hybridev.truth import (
+from hybridev.physics.truth import (
     MIN_NOISE_FACTOR,
     PAPER_NOISE_SIGMAS,
     STRUCTURED_NOISE_SIGMA,
@@ -78,7 +78,7 @@ def check_recipe(dataset: pd.DataFrame, truth: str, seed: int) -> None:
     e = truth_energy(trips, truth, seed, [seed, _NOISE_STREAM[truth]])
     if not np.array_equal(e, dataset["energy_kwh"].to_numpy(float)):
         raise RuntimeError(f"the fresh-test recipe no longer matches make_dataset (truth={truth}, "
-                           f"seed={seed}); hybridev.truth changed: update uq_data.truth_energy")
+                           f"seed={seed}); hybridev.physics.truth changed: update uq_data.truth_energy")
 
 
 def dataset(truth: str, seed: int) -> pd.DataFrame:

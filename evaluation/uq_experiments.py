@@ -31,7 +31,7 @@ import uq_data
 import uq_methods as U
 
 from hybridev import HybridModel
-from hybridev.conformal import NormalizedConformal
+from hybridev.learning.conformal import NormalizedConformal
 
 __all__ = ["SHIFTS", "run_seed"]
 

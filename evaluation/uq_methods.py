@@ -22,8 +22,8 @@ import numpy as np
 import pandas as pd
 
 from hybridev import metrics as M
-from hybridev.conformal import NormalizedConformal
-from hybridev.predictive import EnergyDistribution, soc_from_energy
+from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 
 __all__ = ["LEVELS", "TABLE_LEVELS", "Bands", "check_against_predict_interval", "evaluate",
            "model_bands", "point_bands", "posterior_bands", "posterior_conformal", "soc_bounds"]

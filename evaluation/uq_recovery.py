@@ -3,7 +3,7 @@
 Part of ``evaluation/uncertainty.py``. Per seed ``k``:
 
 * true parameters drawn from the calibration prior
-  (:class:`hybridev.calibrate.PhysicsPrior` defaults, the five
+  (:class:`hybridev.bayes.sampler.PhysicsPrior` defaults, the five
   ``DEFAULT_PARAMS``; truncations respected by rejection), so that averaged
   over seeds a correct sampler of a well-specified model covers at the nominal
   rate (simulation-based calibration); the relative noise is drawn
@@ -20,7 +20,7 @@ this study, ``emcee.moves.DEMove`` mixed 80/20 with
 ``emcee.moves.DESnookerMove``. This study found that the snooker move in emcee
 3.1.6 does not leave the target invariant (on a plain 6-D Gaussian it samples
 standard deviations about 0.7 of the true ones; in the 80/20 mix about 0.9),
-so the old credible intervals were too narrow; ``hybridev.calibrate._moves``
+so the old credible intervals were too narrow; ``hybridev.bayes.sampler._moves``
 now uses DEMove alone. The variant swaps ``_moves`` for the duration of the
 call only (:func:`_old_mix_moves`).
 """
@@ -35,11 +35,12 @@ import emcee
 import numpy as np
 import pandas as pd
 
-import hybridev.calibrate as _calibrate
+import hybridev.bayes.sampler as _calibrate
 from hybridev import VehicleParams, make_trips
-from hybridev.calibrate import DEFAULT_PARAMS, PhysicsPrior, calibrate_physics, simulate_measured
-from hybridev.params import PROFILES
-from hybridev.physics_posterior import PhysicsPosterior
+from hybridev.bayes.posterior import PhysicsPosterior
+from hybridev.bayes.priors import DEFAULT_PARAMS, PhysicsPrior
+from hybridev.bayes.sampler import calibrate_physics, simulate_measured
+from hybridev.physics.params import PROFILES
 
 __all__ = ["N_TRIPS", "run_recovery", "sampler_check"]
 
@@ -115,7 +116,7 @@ def sampler_check(n_steps: int = 6000, seed: int = 0) -> dict[str, float]:
     scales of the calibration problem; 32 walkers started from the target, the first
     quarter of the chain discarded. Compares ``DESnookerMove`` alone, ``DEMove`` alone,
     ``StretchMove``, the pre-fix 80/20 mix and the library's moves
-    (``hybridev.calibrate._moves()``).
+    (``hybridev.bayes.sampler._moves()``).
     """
     sd = np.array([0.02, 0.001, 0.03, 0.2, 0.1, 0.05])
     mu = np.array([0.5, 0.01, 0.9, 0.5, 1.0, -3.0])

@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import uq_report as R
 
-from hybridev.truth import noise_floor_pct, noise_sigma
+from hybridev.physics.oracle import noise_floor_pct
+from hybridev.physics.truth import noise_sigma
 
 __all__ = ["writeup"]
 
@@ -210,7 +211,7 @@ def discussion(v: _V, res: dict) -> list[str]:
                     for t in TRUTHS)
         + "). On the paper truth that is expected, the relative error is i.i.d. noise with "
         "nothing to rank; on the structured truth the i.i.d. residual noise "
-        f"({100 * noise_sigma('structured'):.1f} %, `hybridev.truth`) dominates the relative "
+        f"({100 * noise_sigma('structured'):.1f} %, `hybridev.physics.truth`) dominates the relative "
         "error in distribution (MAPE "
         f"{v.num('structured', 'combined', 'after', 'mape')} % vs a floor of "
         f"{noise_floor_pct('structured'):.2f} %).")
@@ -388,7 +389,7 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         "",
         f"* {cfg['seeds']} seeds per truth (`paper`: the paper's i.i.d. noise; `structured`: "
         f"learnable effects plus {100 * noise_sigma('structured'):.1f} % noise; "
-        "`hybridev.truth`). Seed `s`: "
+        "`hybridev.physics.truth`). Seed `s`: "
         "`make_dataset(1500, truth, seed=s)` split at random into 1,275 fit and 225 test "
         f"trips (\"split\"), plus a fresh test set of {cfg['n_fresh']:,} trips (\"fresh\"): "
         "new conditions (`make_trips(n, seed=10000 + s)`), new trip keys (`trip_id` + "

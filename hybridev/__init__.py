@@ -8,55 +8,54 @@ imported on first use, so ``import hybridev`` stays fast.
 
 import importlib
 
-from .kinematics import (
-    positive_kinetic_energy,
-    synthesize_speed_trace,
-)
-from .params import (
-    PROFILES,
-    DrivingProfile,
-    VehicleParams,
-    get_profile,
-)
-from .physics import (
-    aux_power_kw,
-    hvac_power_kw,
+from .physics.climate import aux_power_kw, hvac_power_kw
+from .physics.forces import (
     soc_trajectory,
     trace_energy_kwh,
     trace_power_kw,
     wheel_power_kw,
 )
-from .trips import (
+from .physics.kinematics import (
+    positive_kinetic_energy,
+    synthesize_speed_trace,
+)
+from .physics.params import (
+    PROFILES,
+    DrivingProfile,
+    VehicleParams,
+    get_profile,
+)
+from .physics.trips import (
     TripTraces,
     make_trips,
     simulate,
     trip_traces,
 )
-from .validation import (
+from .physics.validation import (
     validate_trips,
 )
 
 __version__ = "0.1.0"
 
 _LAZY = {
-    "ConstantRate": "baselines",
-    "LinearBaseline": "baselines",
-    "PhysicsOnly": "baselines",
-    "PureML": "baselines",
-    "PhysicsPrior": "calibrate",
-    "calibrate_physics": "calibrate",
-    "simulate_measured": "calibrate",
-    "ChargingPlan": "charging",
-    "evaluate_charging": "charging",
-    "plan_charging": "charging",
-    "plan_charging_from_distribution": "charging",
-    "NormalizedConformal": "conformal",
-    "run_demo": "demo",
-    "FEATURE_NAMES": "features",
-    "LoggedTraces": "logs",
-    "MeasuredTrips": "logs",
-    "read_measured_trips": "logs",
-    "validate_measured_trips": "measured",
+    "ConstantRate": "learning.baselines",
+    "LinearBaseline": "learning.baselines",
+    "PhysicsOnly": "learning.baselines",
+    "PureML": "learning.baselines",
+    "PhysicsPrior": "bayes.priors",
+    "calibrate_physics": "bayes.sampler",
+    "simulate_measured": "bayes.sampler",
+    "ChargingPlan": "apps.charging.plan",
+    "evaluate_charging": "apps.charging.plan",
+    "plan_charging": "apps.charging.plan",
+    "plan_charging_from_distribution": "apps.charging.plan",
+    "NormalizedConformal": "learning.conformal",
+    "run_demo": "apps.demo",
+    "FEATURE_NAMES": "learning.features",
+    "LoggedTraces": "physics.traces",
+    "MeasuredTrips": "data.logs",
+    "read_measured_trips": "data.logs",
+    "validate_measured_trips": "data.measured",
     "coverage": "metrics",
     "coverage_table": "metrics",
     "crps_gaussian": "metrics",
@@ -69,22 +68,23 @@ _LAZY = {
     "reliability_curve": "metrics",
     "rmse": "metrics",
     "winkler_score": "metrics",
-    "HybridModel": "model",
-    "PAPER_CONFIG": "model",
-    "PhysicsFallbackWarning": "model",
-    "PhysicsPosterior": "physics_posterior",
-    "PhysicsStats": "physics_stats",
-    "energy_from_stats": "physics_stats",
-    "trip_stats": "physics_stats",
-    "EnergyDistribution": "predictive",
-    "plot_soc_fan": "range",
-    "predict_range": "range",
-    "soc_fan": "range",
-    "calibration_report": "report",
-    "effect_breakdown": "truth",
-    "make_dataset": "truth",
-    "noise_floor_pct": "truth",
-    "oracle_energy_kwh": "truth",
+    "HybridModel": "learning.model",
+    "PAPER_CONFIG": "learning.model",
+    "PhysicsFallbackWarning": "core.errors",
+    "ConvergenceWarning": "core.errors",
+    "PhysicsPosterior": "bayes.posterior",
+    "PhysicsStats": "physics.stats",
+    "energy_from_stats": "physics.stats",
+    "trip_stats": "physics.stats_build",
+    "EnergyDistribution": "learning.predictive",
+    "plot_soc_fan": "apps.range_plot",
+    "predict_range": "apps.range",
+    "soc_fan": "apps.range_plot",
+    "calibration_report": "apps.report.build",
+    "effect_breakdown": "physics.truth",
+    "make_dataset": "physics.truth",
+    "noise_floor_pct": "physics.oracle",
+    "oracle_energy_kwh": "physics.oracle",
 }
 """Public names imported on first access, and the module that defines each."""
 
@@ -108,6 +108,7 @@ __all__ = [
     "PROFILES",
     "ChargingPlan",
     "ConstantRate",
+    "ConvergenceWarning",
     "DrivingProfile",
     "EnergyDistribution",
     "HybridModel",

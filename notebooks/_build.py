@@ -20,7 +20,7 @@ from pathlib import Path
 
 import nbformat
 
-from hybridev._io import atomic_path
+from hybridev.core.fileio import atomic_path
 
 HERE = Path(__file__).resolve().parent
 
@@ -324,8 +324,9 @@ PAPER = [
         noise_floor_pct,
         simulate,
     )
-    from hybridev.model import PAPER_CONFIG
-    from hybridev.truth import noise_sigma, oracle_mape_pct
+    from hybridev.learning.model import PAPER_CONFIG
+    from hybridev.physics.truth import noise_sigma
+    from hybridev.physics.oracle import oracle_mape_pct
 
     pd.set_option("display.precision", 3)
     """),
@@ -526,9 +527,9 @@ CALIBRATION = [
         simulate_measured,
         trip_stats,
     )
-    from hybridev.calibrate import DEFAULT_PARAMS
-    from hybridev.physics_posterior import PhysicsPosterior
-    from hybridev.report import calibration_report
+    from hybridev.bayes.priors import DEFAULT_PARAMS
+    from hybridev.bayes.posterior import PhysicsPosterior
+    from hybridev.apps.report.build import calibration_report
 
     pd.set_option("display.precision", 4)
     pd.set_option("display.max_columns", 30)
@@ -767,8 +768,8 @@ RANGE = [
     import pandas as pd
 
     from hybridev import HybridModel, make_dataset, plan_charging, predict_range
-    from hybridev.demo import example_schedule, example_tariff
-    from hybridev.range import plot_soc_fan, soc_fan
+    from hybridev.apps.demo import example_schedule, example_tariff
+    from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 
     pd.set_option("display.precision", 3)
     pd.set_option("display.max_columns", 30)
@@ -796,7 +797,7 @@ RANGE = [
     ranges
     """),
     md("""
-    Mind the caveat in `hybridev.range`: a full battery's range (hundreds of km) is beyond the
+    Mind the caveat in `hybridev.apps.range`: a full battery's range (hundreds of km) is beyond the
     20-200 km training trips, so the network extrapolates in distance and the bands cover the
     true range less often there. `evaluation/range_bands.md` measures their coverage within
     and beyond the training distances, and for a model trained on longer trips.

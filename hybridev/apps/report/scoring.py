@@ -1,0 +1,192 @@
+"""Held-out scores of the calibration report (:mod:`hybridev.apps.report.build`).
+
+Point errors, interval coverage, widths, Winkler scores, CRPS, reliability
+curves and confidence ranking of the three predictors of a
+:class:`~hybridev.apps.report.build.HoldoutResult`, all computed with
+:mod:`hybridev.metrics`. Intervals that the conformal step cannot bound at a
+level (too few calibration trips) are unbounded: their coverage is 1 and
+their width and Winkler score are reported as ``None``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pandas as pd
+
+from hybridev import metrics as M
+
+__all__ = ["FLAG_FRACTION", "MODEL_LABELS", "REPORT_LEVELS", "jsonable", "score_holdout"]
+
+REPORT_LEVELS = M.DEFAULT_LEVELS
+"""Levels of the reliability curve: 0.05, 0.10, ..., 0.95 (includes 0.5, 0.8, 0.9, 0.95)."""
+
+FLAG_FRACTION = 0.1
+"""Share of held-out trips flagged by ``confidence`` (largest predictive sd)."""
+
+MODEL_LABELS = {"nominal": "nominal physics", "calibrated": "calibrated physics (posterior)",
+                "hybrid": "hybrid (physics + residual ensemble + conformal)"}
+
+
+def jsonable(obj):
+    """``obj`` with numpy scalars/arrays, tuples and dataclasses made JSON-able.
+
+    Non-finite floats become ``None`` (JSON has no NaN or infinity).
+
+    Examples
+    --------
+    >>> jsonable({"a": np.float64(np.inf), "b": (np.int64(1), 2.5)})
+    {'a': None, 'b': [1, 2.5]}
+    """
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return jsonable(dataclasses.asdict(obj))
+    if isinstance(obj, list | tuple | np.ndarray | pd.Index):
+        return [jsonable(v) for v in list(obj)]
+    if isinstance(obj, bool | np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, str):
+        return obj
+    if obj is pd.NA or obj is pd.NaT:
+        return None
+    return str(obj)
+
+
+def _safe(fn, *args, **kwargs):
+    """``fn(...)``, or None when the metric is undefined (e.g. constant scores)."""
+    try:
+        return fn(*args, **kwargs)
+    except ValueError:
+        return None
+
+
+def _point(y: np.ndarray, p: np.ndarray) -> dict:
+    return {"mape_pct": M.mape(y, p), "mae_kwh": M.mae(y, p), "rmse_kwh": M.rmse(y, p),
+            "bias_pct": float(np.mean(p / y - 1.0) * 100.0)}
+
+
+def _key(level: float) -> str:
+    return f"{level:g}"
+
+
+def _intervals(y, levels, lo, hi, level) -> dict:
+    """Coverage table, reliability curve and main-level scores of intervals (L, n)."""
+    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    emp = np.mean((lo <= y) & (y <= hi), axis=1)  # exact also for unbounded levels
+    if finite.any():  # the library's curve where the intervals are bounded
+        emp[finite] = M.reliability_curve(y, (lo[finite], hi[finite]), levels[finite]).empirical
+    table = []
+    for lv in sorted({*M.TABLE_LEVELS, level}):
+        i = int(np.flatnonzero(np.isclose(levels, lv))[0])
+        row = {"nominal": float(lv), "empirical": float(emp[i]),
+               "coverage_se": float(np.sqrt(lv * (1 - lv) / y.size)), "mean_width_kwh": None,
+               "winkler_kwh": None, "unbounded": not bool(finite[i])}
+        if finite[i]:
+            t = M.coverage_table(y, {float(lv): (lo[i], hi[i])}).iloc[0]
+            row.update(empirical=float(t["empirical"]), mean_width_kwh=float(t["mean_width"]),
+                       winkler_kwh=float(t["winkler"]))
+        table.append(row)
+    main = next(r for r in table if np.isclose(r["nominal"], level))
+    return {
+        "coverage": {_key(r["nominal"]): r["empirical"] for r in table},
+        "coverage_table": table,
+        "mean_width_kwh": main["mean_width_kwh"], "winkler_kwh": main["winkler_kwh"],
+        "reliability": {"nominal": levels.tolist(), "empirical": emp.tolist(),
+                        "unbounded": (~finite).tolist()},
+        "miscalibration_area": float(np.mean(np.abs(emp - levels))),
+    }
+
+
+def _confidence(y, p, u) -> dict:
+    return {"spearman_confidence": _safe(M.spearman_confidence, y, p, u),
+            "auroc_confidence": _safe(M.auroc_worst, y, p, u, worst_frac=FLAG_FRACTION)}
+
+
+def _flagged(pred: pd.DataFrame) -> list[dict]:
+    n_flag = max(1, math.ceil(FLAG_FRACTION * len(pred)))
+    err = (pred["energy_kwh_pred"] - pred["energy_kwh"]).abs()
+    rank = err.rank(ascending=False, method="min").astype(int)
+    order = np.argsort(-pred["confidence"].to_numpy(float), kind="stable")[:n_flag]
+    cols = [c for c in ("trip_id", "distance_km", "avg_speed_kmh", "temperature_c") if c in pred]
+    out = pred.iloc[order][[*cols, "energy_kwh", "energy_kwh_pred", "energy_kwh_lo",
+                            "energy_kwh_hi", "confidence"]].copy()
+    out["abs_error_kwh"] = err.iloc[order].to_numpy()
+    out["error_rank"] = rank.iloc[order].to_numpy()
+    return out.to_dict(orient="records")
+
+
+def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
+    """Summary of a :class:`~hybridev.apps.report.build.HoldoutResult`.
+
+    Parameters
+    ----------
+    result : HoldoutResult
+    rejected : pandas.DataFrame, optional
+        Rejected input rows (``MeasuredTrips.rejected``), listed and counted.
+
+    Returns
+    -------
+    dict
+        ``metrics`` per predictor (``nominal``, ``calibrated``, ``hybrid``):
+        ``mape_pct`` (percent), ``mae_kwh``, ``rmse_kwh``, ``bias_pct``
+        (mean signed relative error, percent); for the two probabilistic
+        ones also ``coverage`` (``{"0.5": fraction, ...}``), ``coverage_table``,
+        ``mean_width_kwh`` and ``winkler_kwh`` at the main level,
+        ``crps_kwh``, ``reliability``, ``miscalibration_area``,
+        ``spearman_confidence`` and ``auroc_confidence`` (predictive sd vs
+        absolute error; AUROC for the worst 10 %). Also ``data``, ``split``,
+        ``parameters`` (posterior of (b) vs nominal, 90 % intervals),
+        ``diagnostics``, ``hybrid`` (fit information), ``flagged`` trips,
+        ``rejected`` rows, ``labels`` and ``config``.
+    """
+    pred = result.predictions
+    y = pred["energy_kwh"].to_numpy(float)
+    lv = result.level
+    cal = _point(y, pred["energy_kwh_calibrated"].to_numpy(float))
+    cal.update(_intervals(y, result.levels, *result.intervals["calibrated"], lv))
+    cal["crps_kwh"] = M.crps_samples(y, result.calibrated_draws.T)
+    cal.update(_confidence(y, pred["energy_kwh_calibrated"], pred["energy_kwh_calibrated_sd"]))
+    hyb = _point(y, pred["energy_kwh_pred"].to_numpy(float))
+    hyb.update(_intervals(y, result.levels, *result.intervals["hybrid"], lv))
+    hyb["crps_kwh"] = (None if result.hybrid_mixture is None
+                       else M.crps_mixture(y, *result.hybrid_mixture))
+    hyb.update(_confidence(y, pred["energy_kwh_pred"], pred["confidence"]))
+    rej = rejected if rejected is not None else pd.DataFrame(
+        columns=["source", "row", "trip_id", "field", "value", "reason"])
+    src = rej["source"] if "source" in rej.columns else pd.Series("trips", index=rej.index)
+    n_valid = result.n_train + result.n_test
+    post, model = result.posterior, result.model
+    d = post.diagnostics
+    hyb_post = getattr(model, "posterior_", None)
+    cp = getattr(model, "conformal_", None)
+    return jsonable({
+        "data": {"n_rows_read": n_valid + int((src == "trips").sum()), "n_valid": n_valid,
+                 "n_rejected": len(rej), "n_rejected_trip_rows": int((src == "trips").sum()),
+                 "n_rejected_timeseries": int((src == "timeseries").sum()),
+                 "logged_traces": result.logged_traces},
+        "split": {"n_train": result.n_train, "n_test": result.n_test,
+                  "n_train_groups": result.n_train_groups, "n_test_groups": result.n_test_groups,
+                  "group_column": result.config.get("group_column")},
+        "level": lv,
+        "metrics": {"nominal": _point(y, pred["energy_kwh_nominal"].to_numpy(float)),
+                    "calibrated": cal, "hybrid": hyb},
+        "labels": dict(MODEL_LABELS),
+        "parameters": post.summary(0.9).reset_index().to_dict(orient="records"),
+        "diagnostics": {k: d.get(k) for k in (
+            "n_walkers", "n_steps", "burn_in", "thin", "n_samples", "acceptance_mean",
+            "acceptance_min", "tau", "tau_max", "chain_length_tau", "converged", "elapsed_s")}
+        | {"warnings": result.warnings},
+        "hybrid": {"fit_info": model.fit_info_,
+                   "n_conformal_calibration": None if cp is None else cp.n_calibration,
+                   "physics_posterior_median": None if hyb_post is None else hyb_post.median()},
+        "flagged": _flagged(pred),
+        "rejected": rej.to_dict(orient="records"),
+        "config": result.config,
+    })

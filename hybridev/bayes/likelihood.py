@@ -1,0 +1,177 @@
+"""Log-posterior of the physics parameters given measured trip energies, and its mode.
+
+The log-likelihood is vectorised over walkers: a (n_walkers, n_params) block of
+parameters gives (n_walkers,) log-probabilities with one matrix product over the
+trips' sufficient statistics (hybridev.physics.stats).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import minimize
+
+from hybridev.physics.stats import PhysicsStats
+
+__all__ = []
+
+
+class _LogPosterior:
+    """Vectorised log posterior over ``theta = (params..., [mode logits,] log sigma_rel)``.
+
+    With ``infer_modes`` the mixture weights of unlabelled trips are
+    ``pi = softmax(0, a_normal, a_aggressive)`` (eco first, as in PROFILES) with a
+    Dirichlet(1, 1, 1) prior on ``pi``, i.e. ``log p(a) = sum(log pi)`` in these
+    coordinates; ``|a| < 20``.
+    """
+
+    def __init__(self, stats: PhysicsStats, energy_kwh: np.ndarray, names, specs, prior,
+                 fixed: dict[str, float], infer_modes: bool = False):
+        self.names = list(names)
+        self.n_alr = 2 if infer_modes else 0
+        self.F = stats.features()
+        self.y = energy_kwh[stats.trip]
+        self.log_w = stats.log_weight
+        self.n_trips = stats.n_trips
+        specs = list(specs) + [("alr", 0.0, np.inf, -20.0, 20.0)] * self.n_alr
+        self.kind_log = np.array([s[0] == "lognormal" for s in specs])
+        self.centre = np.array([s[1] for s in specs], dtype=float)
+        self.sd = np.array([s[2] for s in specs], dtype=float)
+        self.lo = np.array([s[3] for s in specs], dtype=float)
+        self.hi = np.array([s[4] for s in specs], dtype=float)
+        self.log_noise = np.log(prior.noise_rel_bounds)
+        self.fixed = fixed
+        self.shape = None
+        if stats.marginalised:
+            # Padded layout (max_alt, n_trips): padding columns have zero features,
+            # hence zero energy and zero likelihood, and weight -inf.
+            starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
+            counts = np.diff(np.r_[starts, stats.n_rows])
+            k = np.arange(counts.max())
+            live = k[:, None] < counts[None, :]
+            idx = np.where(live, starts[None, :] + k[:, None], 0).ravel()
+            self.F = np.where(live.ravel(), self.F[:, idx], 0.0)
+            self.y = np.where(live.ravel(), self.y[idx], 1.0)
+            self.log_w = np.where(live.ravel(), 0.0 if infer_modes else self.log_w[idx], -np.inf)
+            self.shape = live.shape
+            self.unknown = (counts > 1).astype(float)
+        if infer_modes and (self.shape is None or self.shape[0] != 3):
+            raise ValueError("missing_mode='infer' needs at least one trip without a mode "
+                             "(its weights are learned from unlabelled trips)")
+
+    def values(self, theta: np.ndarray) -> dict[str, np.ndarray]:
+        out = {n: np.full(len(theta), v) for n, v in self.fixed.items()}
+        out.update({n: theta[:, i] for i, n in enumerate(self.names)})
+        return out
+
+    def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        x = theta[:, :-1]
+        inside = (x > self.lo) & (x < self.hi)
+        lx = np.log(np.where(self.kind_log & inside, x, 1.0))
+        z = (np.where(self.kind_log, lx, x) - self.centre) / self.sd
+        lp = (-0.5 * z * z - np.where(self.kind_log, lx, 0.0)).sum(axis=1)
+        if self.n_alr:
+            lp = lp + self.log_pi(theta).sum(axis=1)  # Dirichlet(1, 1, 1) in alr coordinates
+        ls = theta[:, -1]
+        ok = inside.all(axis=1) & (ls > self.log_noise[0]) & (ls < self.log_noise[1])
+        return np.where(ok, lp, -np.inf)
+
+    def log_pi(self, theta: np.ndarray) -> np.ndarray:
+        """Log mixture weights (n, 3) from the two logits."""
+        n = len(self.names)
+        logits = np.column_stack([np.zeros(len(theta)), theta[:, n:n + 2]])
+        mx = logits.max(axis=1, keepdims=True)
+        return logits - mx - np.log(np.exp(logits - mx).sum(axis=1, keepdims=True))
+
+    def log_lik(self, theta: np.ndarray) -> np.ndarray:
+        v = self.values(theta)
+        inv = 1.0 / v["drivetrain_efficiency"]
+        s = v["regen_scale"]
+        cr, cda, b = v["rolling_resistance_coef"], v["drag_area_m2"], v["linear_drag_n_per_mps"]
+        coef = np.stack([cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s,
+                         v["aux_base_kw"], v["hvac_scale"], np.ones(len(theta))], axis=1)
+        e = coef @ self.F
+        log_sig = theta[:, -1]
+        # log N(y | e, (sigma e)^2) = -(y/e - 1)^2 / (2 sigma^2) - log e - log sigma - log(2 pi)/2,
+        # in place (hot path); e <= 0 has zero likelihood.
+        ll = np.divide(self.y, e)
+        ll -= 1.0
+        ll *= ll
+        ll *= (-0.5 * np.exp(-2.0 * log_sig))[:, None]
+        ll -= np.log(e)
+        bad = ~(e > 0)
+        if bad.any():
+            ll[bad] = -np.inf
+        const = self.n_trips * (-log_sig - 0.5 * np.log(2 * np.pi))
+        if self.shape is None:
+            return ll.sum(axis=1) + const
+        ll += self.log_w
+        ll = ll.reshape(len(theta), *self.shape)
+        if self.n_alr:
+            ll += self.log_pi(theta)[:, :, None] * self.unknown
+        m = ll.max(axis=1)
+        m[~np.isfinite(m)] = 0.0
+        ll -= m[:, None, :]
+        np.exp(ll, out=ll)
+        return (np.log(ll.sum(axis=1)) + m).sum(axis=1) + const
+
+    def __call__(self, theta) -> np.ndarray:
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        out = np.full(len(theta), -np.inf)
+        with np.errstate(all="ignore"):
+            lp = self.log_prior(theta)
+            ok = np.isfinite(lp) & np.isfinite(theta).all(axis=1)
+            if ok.any():
+                out[ok] = lp[ok] + self.log_lik(theta[ok])
+        out[~np.isfinite(out)] = -np.inf
+        return out
+
+
+def _map_and_cov(logpost: _LogPosterior, start: np.ndarray, scale: np.ndarray):
+    """MAP by L-BFGS-B in scaled coordinates, then a finite-difference Gaussian."""
+    lo = np.r_[logpost.lo, logpost.log_noise[0]]
+    hi = np.r_[logpost.hi, logpost.log_noise[1]]
+    margin = 1e-6 * (np.minimum(hi, start + 50 * scale) - np.maximum(lo, start - 50 * scale))
+    bounds = [((a + m - s0) / sc if np.isfinite(a) else None,
+               (b - m - s0) / sc if np.isfinite(b) else None)
+              for a, b, m, s0, sc in zip(lo, hi, margin, start, scale, strict=True)]
+
+    def f(z):
+        v = logpost((start + z * scale)[None, :])[0]
+        return -v if np.isfinite(v) else 1e12
+
+    res = minimize(f, np.zeros(len(start)), method="L-BFGS-B", bounds=bounds)
+    theta = start + res.x * scale
+    steps = scale * 1e-3
+    cov = None
+    for _ in range(2):  # second pass: steps of 0.1 posterior sd
+        with np.errstate(all="ignore"):
+            h = _hessian(logpost, theta, steps)
+        if not np.all(np.isfinite(h)):
+            break
+        try:
+            c = np.linalg.inv(-h)
+            if not np.all(np.linalg.eigvalsh(0.5 * (c + c.T)) > 0):
+                break
+        except np.linalg.LinAlgError:
+            break
+        cov = 0.5 * (c + c.T)
+        steps = 0.1 * np.sqrt(np.diag(cov))
+    return theta, cov
+
+
+def _hessian(logpost, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
+    p = len(theta)
+    eye = np.eye(p) * h
+    pts = [theta]
+    pts += [theta + eye[i] for i in range(p)] + [theta - eye[i] for i in range(p)]
+    pairs = [(i, j) for i in range(p) for j in range(i + 1, p)]
+    for i, j in pairs:
+        pts += [theta + eye[i] + eye[j], theta + eye[i] - eye[j],
+                theta - eye[i] + eye[j], theta - eye[i] - eye[j]]
+    f = logpost(np.array(pts))
+    f0, fp, fm = f[0], f[1:p + 1], f[p + 1:2 * p + 1]
+    hess = np.diag((fp - 2 * f0 + fm) / h**2)
+    for k, (i, j) in enumerate(pairs):
+        a, b, c, d = f[2 * p + 1 + 4 * k: 2 * p + 5 + 4 * k]
+        hess[i, j] = hess[j, i] = (a - b - c + d) / (4 * h[i] * h[j])
+    return hess

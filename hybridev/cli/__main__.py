@@ -1,0 +1,5 @@
+import sys
+
+from hybridev.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,63 @@
+"""``hybridev plan-charging``: risk-aware charging plan for a trip schedule and a tariff."""
+
+from __future__ import annotations
+
+import argparse
+
+NAME = "plan-charging"
+HELP = "cheapest charging plan keeping P(SoC < soc_min) below a risk level"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("schedule", help="trip schedule .csv/.parquet (departure, distance_km, "
+                   "avg_speed_kmh, mode, temperature_c; optional duration_h, trip_id)")
+    p.add_argument("--tariff", required=True,
+                   help="tariff .csv/.parquet with start, price_per_kwh (regular slots)")
+    p.add_argument("--soc-now", type=float, required=True, help="SoC at the start, [0, 1]")
+    p.add_argument("--risk", type=float, default=0.05,
+                   help="allowed P(SoC < soc_min at some arrival), (0, 0.5] (default 0.05)")
+    p.add_argument("--model", default=None,
+                   help="directory of a saved HybridModel (hybridev.learning.model.HybridModel.load); "
+                        "required")
+    p.add_argument("--charger-kw", type=float, default=11.0, help="charger power, kW (default 11)")
+    p.add_argument("--efficiency", type=float, default=0.9,
+                   help="charge efficiency, (0, 1] (default 0.9)")
+    p.add_argument("--soc-min", type=float, default=0.1, help="lowest allowed SoC (default 0.1)")
+    p.add_argument("--soc-max", type=float, default=1.0, help="highest allowed SoC (default 1)")
+    p.add_argument("--method", choices=("quantile", "scenario"), default="quantile",
+                   help="chance-constraint method (default quantile)")
+    p.add_argument("--n-samples", type=int, default=None,
+                   help="calibration samples (default 4000 quantile / 300 scenario)")
+    p.add_argument("--n-eval", type=int, default=20000,
+                   help="fresh samples for the achieved risk (default 20000)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--risk-neutral", action="store_true",
+                   help="plan for mean energies only (no chance constraint)")
+    p.add_argument("--out", default="plan.csv", help="plan per slot, .csv/.parquet (default plan.csv)")
+    p.add_argument("--trips-out", default=None, help="optional per-trip table, .csv/.parquet")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hybridev.apps.charging.plan import plan_charging
+    from hybridev.core.fileio import read_table, write_table
+
+    schedule = read_table(args.schedule)
+    tariff = read_table(args.tariff)
+    if args.model is None:
+        raise ValueError("--model DIR is required: the plan needs the predictive energy "
+                         "distribution of a saved HybridModel")
+    from hybridev.learning.model import HybridModel
+
+    model = HybridModel.load(args.model)
+    result = plan_charging(
+        model, schedule, soc_now=args.soc_now, tariff=tariff, charger_kw=args.charger_kw,
+        charge_efficiency=args.efficiency, soc_min=args.soc_min, soc_max=args.soc_max,
+        risk=args.risk, method=args.method, n_samples=args.n_samples, n_eval=args.n_eval,
+        seed=args.seed, risk_neutral=args.risk_neutral)
+    print(result.summary())
+    write_table(result.plan, args.out)
+    print(f"wrote {len(result.plan)} slots to {args.out}")
+    if args.trips_out:
+        write_table(result.trips, args.trips_out)
+        print(f"wrote {len(result.trips)} trips to {args.trips_out}")
+    return 0

@@ -1,0 +1,54 @@
+"""``hybridev simulate``: the paper's trip dataset with physics columns."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+NAME = "simulate"
+HELP = "generate the paper's trip dataset and run the physics model"
+
+_SUFFIXES = (".csv", ".parquet", ".pq")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--n-trips", type=int, default=1500, help="number of trips (default 1500)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--n-steps", type=int, default=1000, help="intervals per trip (default 1000)")
+    p.add_argument("--out", default="trips.csv", help="output .csv or .parquet (default trips.csv)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def check_out_path(out: str) -> Path:
+    """Fail early, before any work, if ``out`` cannot be written as a table."""
+    path = Path(out)
+    if path.suffix.lower() not in _SUFFIXES:
+        raise ValueError(f"--out={out!r} must end in one of {list(_SUFFIXES)}")
+    if path.is_dir():
+        raise ValueError(f"--out={out!r} is a directory; give a file name")
+    anc = path.parent
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if not anc.is_dir():
+        raise ValueError(f"--out={out!r} is not writable: {str(anc)!r} is not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise ValueError(f"--out={out!r} is not writable: no write permission in {str(anc)!r}")
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    from hybridev.core.fileio import write_table
+    from hybridev.core.progress import progress_bar
+    from hybridev.physics.trips import make_trips, simulate
+
+    check_out_path(args.out)
+    trips = make_trips(args.n_trips, seed=args.seed)
+    with progress_bar(total=len(trips), unit="trip", desc="simulate", quiet=args.quiet) as bar:
+        out = simulate(trips, n_steps=args.n_steps, seed=args.seed, progress=bar.update_to)
+    try:
+        write_table(out, args.out)
+    except OSError as exc:
+        raise ValueError(f"--out={args.out!r} could not be written: {exc}") from exc
+    print(f"wrote {len(out)} trips to {args.out}")
+    return 0

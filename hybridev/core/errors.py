@@ -1,0 +1,18 @@
+"""Warnings and errors shared by the layers (the bottom of the import graph).
+
+Every layer raises :class:`ValueError` for bad input (naming the field, the value
+and the allowed range); the classes here are the package's own warnings, kept in
+one small module so that no layer has to import another to raise or catch them.
+"""
+
+from __future__ import annotations
+
+__all__ = ["ConvergenceWarning", "PhysicsFallbackWarning"]
+
+
+class ConvergenceWarning(UserWarning):
+    """The MCMC chain is shorter than 50 autocorrelation times."""
+
+
+class PhysicsFallbackWarning(UserWarning):
+    """A prediction used the physics model only, because no network was fitted."""

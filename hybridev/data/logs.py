@@ -1,0 +1,206 @@
+"""Measured trips: a trip table, its optional logged traces and the rejected rows.
+
+:func:`read_measured_trips` reads CSV or Parquet files and
+:func:`measured_from_frames` takes DataFrames; both validate the trip table
+(:func:`hybridev.data.measured.validate_measured_trips`) and the time series
+(:func:`hybridev.data.timeseries.validate_timeseries`), derive missing trip
+summaries from the traces, and report every rejected row with its reason.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.core.fileio import read_table
+from hybridev.data.measured import validate_measured_trips
+from hybridev.data.timeseries import (
+    REJECTED_COLUMNS,
+    validate_timeseries,
+)
+from hybridev.physics.params import VehicleParams
+from hybridev.physics.traces import LoggedTraces
+
+__all__ = ["MeasuredTrips", "measured_from_frames", "read_measured_trips"]
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredTrips:
+    """A validated measured-trip table, its logged traces and what was rejected.
+
+    Attributes
+    ----------
+    trips : pandas.DataFrame
+        Valid rows (see :func:`hybridev.data.measured.validate_measured_trips`),
+        with ``energy_kwh`` and a ``mode`` column (``None`` when unlabelled).
+    traces : LoggedTraces or None
+        Logged traces of the trips that have one (keyed by ``trip_id``).
+    rejected : pandas.DataFrame
+        One row per rejected trip-table row or time-series trip: ``source``
+        (``"trips"`` or ``"timeseries"``), ``row``, ``trip_id``, ``field``,
+        ``value``, ``reason``.
+    """
+
+    trips: pd.DataFrame
+    traces: LoggedTraces | None
+    rejected: pd.DataFrame
+
+    @property
+    def n_rejected(self) -> int:
+        """Number of rejected rows/trips."""
+        return len(self.rejected)
+
+    def select(self, mask) -> MeasuredTrips:
+        """Subset by a boolean mask over ``trips`` rows (traces follow)."""
+        t = self.trips.loc[np.asarray(mask, dtype=bool)]
+        tr = None
+        if self.traces is not None:
+            have = t["trip_id"].isin(self.traces.trip_id).to_numpy()
+            tr = self.traces.select(t["trip_id"].to_numpy(object)[have])
+        return MeasuredTrips(t, tr, self.rejected)
+
+
+def _derive_from_traces(trips: pd.DataFrame, traces: LoggedTraces) -> pd.DataFrame:
+    """Fill missing/empty trip columns from the traces (see read_measured_trips)."""
+    out = trips.copy()
+    pos = pd.Index(traces.trip_id).get_indexer(out["trip_id"].astype(object))
+    has = pos >= 0
+    derived = {
+        "distance_km": traces.distance_km(),
+        "avg_speed_kmh": traces.distance_km() / traces.duration_s() * 3600.0,
+    }
+    if traces.temperature_c is not None:
+        derived["temperature_c"] = traces.per_trip_mean(traces.temperature_c)
+    if traces.soc is not None:
+        derived["soc_initial"] = traces.soc[traces.offsets[:-1]]
+        derived["soc_final"] = traces.soc[traces.offsets[1:] - 1]
+    for name, val in derived.items():
+        fill = np.full(len(out), np.nan)
+        fill[has] = val[pos[has]]
+        if name not in out.columns:
+            if name == "soc_final" and "energy_kwh" in out.columns:
+                continue
+            out[name] = fill
+        else:
+            empty = out[name].isna().to_numpy() & has
+            if empty.any():
+                out[name] = out[name].astype(object)
+                out.loc[empty, name] = fill[empty]
+    return out
+
+
+def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = None,
+                         vehicle: VehicleParams | None = None, *, min_samples: int = 10,
+                         max_gap_s: float = 120.0, grade_window_m: float = 200.0
+                         ) -> MeasuredTrips:
+    """Validate a measured-trip table and, optionally, its logged time series.
+
+    See :func:`read_measured_trips`; this does the same on DataFrames.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> trips = pd.DataFrame({"trip_id": ["a"], "temperature_c": [20.0],
+    ...                       "soc_initial": [0.8], "energy_kwh": [0.2]})
+    >>> ts = pd.DataFrame({"trip_id": ["a"] * 61, "t_s": range(61), "speed_kmh": [72.0] * 61})
+    >>> m = measured_from_frames(trips, ts)
+    >>> round(float(m.trips.distance_km.iloc[0]), 3), round(float(m.trips.avg_speed_kmh.iloc[0]), 1)
+    (1.2, 72.0)
+    """
+    veh = vehicle or VehicleParams()
+    traces, ts_rej = None, pd.DataFrame(columns=REJECTED_COLUMNS)
+    table = trips
+    if timeseries is not None:
+        if not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
+            raise ValueError("trips need a 'trip_id' column to be matched with a time series")
+        traces, ts_rej = validate_timeseries(timeseries, min_samples=min_samples,
+                                             max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+        table = _derive_from_traces(trips, traces)
+    extra = []
+    if isinstance(table, pd.DataFrame) and "trip_id" in table.columns:
+        tid = table["trip_id"].astype(object)
+        dup = tid.duplicated(keep="first").to_numpy()
+        bad_ts = tid.isin(ts_rej["trip_id"].dropna()).to_numpy() & ~dup
+        for mask, field, why in ((dup, "trip_id", "duplicate trip_id={v!r}"),
+                                 (bad_ts, "trip_id", "time series of trip_id={v!r} was rejected")):
+            if mask.any():
+                extra.append(pd.DataFrame({
+                    "source": "trips", "row": table.index[mask], "trip_id": tid[mask].to_numpy(),
+                    "field": field, "value": tid[mask].to_numpy(),
+                    "reason": [why.format(v=v) for v in tid[mask].tolist()]}))
+        table = table.loc[~(dup | bad_ts)]
+        if len(table) == 0:
+            raise ValueError("measured trips: all rows were rejected; first reason: "
+                             f"{extra[0]['reason'].iloc[0]}")
+    good, rej = validate_measured_trips(table, veh, on_error="collect")
+    if len(rej):
+        rej = rej.assign(source="trips", trip_id=(
+            table.loc[rej["row"], "trip_id"].to_numpy(object) if "trip_id" in table.columns
+            else None))
+    parts = [p for p in (*extra, rej, ts_rej) if len(p)]
+    rejected = (pd.concat(parts, ignore_index=True)[REJECTED_COLUMNS] if parts
+                else pd.DataFrame(columns=REJECTED_COLUMNS))
+    if traces is not None:
+        orphan = ~pd.Index(traces.trip_id).isin(trips["trip_id"].astype(object))
+        if orphan.any():
+            ids = traces.trip_id[orphan]
+            rejected = pd.concat([rejected, pd.DataFrame({
+                "source": "timeseries", "row": None, "trip_id": ids, "field": "trip_id",
+                "value": ids, "reason": [f"trip_id={v!r} has a time series but no trip row"
+                                         for v in ids.tolist()]})], ignore_index=True)
+        keep = good["trip_id"].isin(traces.trip_id).to_numpy()
+        traces = traces.select(good["trip_id"].to_numpy(object)[keep])
+    return MeasuredTrips(good, traces, rejected)
+
+
+def read_measured_trips(trips_path: str | os.PathLike,
+                        timeseries_path: str | os.PathLike | None = None,
+                        vehicle: VehicleParams | None = None, *, min_samples: int = 10,
+                        max_gap_s: float = 120.0, grade_window_m: float = 200.0
+                        ) -> MeasuredTrips:
+    """Load and validate measured trips (CSV or Parquet) and their logged time series.
+
+    The trip table is checked by
+    :func:`~hybridev.data.measured.validate_measured_trips` in ``"collect"`` mode:
+    malformed rows are reported in ``rejected`` with row, field, value and
+    reason, never silently dropped. With a time series
+    (:func:`validate_timeseries`), the trip table needs ``trip_id``; trips
+    whose trace was rejected are rejected too; duplicated ``trip_id`` rows are
+    rejected after the first. Missing or empty ``distance_km``,
+    ``avg_speed_kmh`` (distance / logged duration), ``temperature_c`` (time
+    mean of ``amb_temp_c``), ``soc_initial`` and ``soc_final`` (first and last
+    logged ``soc``; only when the table has no ``energy_kwh``) are derived from
+    the trace. Trips without logged samples keep a synthesised trace later.
+
+    Parameters
+    ----------
+    trips_path, timeseries_path : path
+        ``.csv`` or ``.parquet`` files.
+    vehicle : VehicleParams, optional
+        Battery capacity for energy derived from SoC.
+    min_samples, max_gap_s, grade_window_m
+        See :func:`validate_timeseries`.
+
+    Returns
+    -------
+    MeasuredTrips
+        Satisfies ``len(trips) + rejected.source.eq("trips").sum() == rows in the file``.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile, pandas as pd
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> pd.DataFrame({"distance_km": [10.0, -1.0], "avg_speed_kmh": [40.0, 40.0],
+    ...               "temperature_c": [20.0, 20.0], "soc_initial": [0.8, 0.8],
+    ...               "energy_kwh": [1.5, 1.5]}).to_csv(d / "t.csv", index=False)
+    >>> m = read_measured_trips(d / "t.csv")
+    >>> len(m.trips), m.rejected.field.tolist()
+    (1, ['distance_km'])
+    """
+    trips = read_table(trips_path)
+    ts = None if timeseries_path is None else read_table(timeseries_path)
+    return measured_from_frames(trips, ts, vehicle, min_samples=min_samples,
+                                max_gap_s=max_gap_s, grade_window_m=grade_window_m)

@@ -1,0 +1,49 @@
+"""Checks of the model's inputs at the public boundary: trip tables to predict on and
+scalar settings (each error names the field, the value and the allowed range).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from hybridev.learning.features import (
+    normalize_modes,
+)
+from hybridev.physics.validation import TRIP_RULES, check_table
+
+__all__ = ["validate_prediction_trips"]
+
+
+_TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
+
+
+def validate_prediction_trips(trips: pd.DataFrame) -> pd.DataFrame:
+    """Validate a trip table to predict on; ``mode`` may be missing or empty.
+
+    Returns a copy with a ``mode`` column (``None`` where unknown).
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"distance_km": [10.0], "avg_speed_kmh": [50.0],
+    ...                   "temperature_c": [20.0], "soc_initial": [0.9]})
+    >>> validate_prediction_trips(t)["mode"].tolist()
+    [None]
+    """
+    good, _ = check_table(trips, required=_TRIP_REQUIRED, rules=TRIP_RULES,
+                          mode_required=False, what="trips")
+    return good.assign(mode=normalize_modes(good.get("mode"), len(good)))
+
+
+def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = False,
+                 lo_open: bool = False, hi_open: bool = False) -> None:
+    ok = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+    ok = ok and math.isfinite(value) and (not integer or float(value) == int(value))
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+    if not ok:
+        kind = "an integer " if integer else ""
+        raise ValueError(f"{name}={value!r} must be {kind}in "
+                         f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}")

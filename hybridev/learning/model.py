@@ -1,0 +1,550 @@
+"""The hybrid physics + residual model (paper, Secs. III-IV).
+
+``E_h = E_p + dE``: the physics model (:func:`hybridev.simulate`) gives
+``E_p``; a small network (:mod:`hybridev.learning.nn`) trained on measured trips
+predicts the residual ``dE = E* - E_p`` from the trip features
+(:mod:`hybridev.learning.features`); the final SoC is ``max(0, s0 - E_h / C)``.
+
+Conventions beyond the paper (documented deviations):
+
+* Trips without a ``mode`` use a uniform one-hot and the ``"normal"`` profile
+  for the physics; trips without an ``hour`` column use noon (see
+  :mod:`hybridev.learning.features`).
+* The residual may not turn a consuming trip into a generating one:
+  ``energy_kwh_pred = max(E_p + dE, min(E_p, 0))``. Measured energies are
+  never negative (validation rejects them), so the network has never seen a
+  negative target; only the physics (a long descent, ``grade_pct``) may
+  predict net regeneration, and then the prediction is not pushed below it.
+* A validation share of ``val_fraction`` (default ``0.15 / 0.85``, the
+  paper's 225 of 1,275 non-test trips) is split off the measured trips, at
+  random with the fit seed, for early stopping.
+* An unfitted model, or one saved before fitting, predicts the physics
+  energy and warns (:class:`PhysicsFallbackWarning`), as the paper's
+  "defaults to the validated physics model".
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from types import MappingProxyType
+
+import numpy as np
+import pandas as pd
+import torch
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+
+from hybridev.bayes.priors import DEFAULT_PARAMS
+from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.data.logs import MeasuredTrips
+from hybridev.data.measured import validate_measured_trips
+from hybridev.data.timeseries import as_traces
+from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.features import (
+    FEATURE_NAMES,
+    check_feature_names,
+    fit_standardizer,
+    normalize_modes,
+    physics_modes,
+    trip_features,
+)
+from hybridev.learning.inputs import _check_range, validate_prediction_trips
+from hybridev.learning.nn import train_ensemble
+from hybridev.learning.persist import load_model, save_model
+from hybridev.learning.predictive import soc_from_energy
+from hybridev.learning.uncertainty import ProbabilisticMixin
+from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
+from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
+from hybridev.physics.stats_build import trip_stats
+from hybridev.physics.traces import LoggedTraces
+from hybridev.physics.trips import simulate, with_physics_columns
+
+__all__ = [
+    "PAPER_CONFIG",
+    "VAL_FRACTION",
+    "HybridModel",
+]
+
+PAPER_CONFIG = MappingProxyType({
+    "n_members": 1, "heteroscedastic": False, "calibrate_physics": False,
+    "conformal_fraction": 0.0, "residual_target": "absolute"})
+"""Constructor settings of the paper's point model: one network (10/11-64-32-16-1,
+dropout 0.2) trained with MSE on the absolute residual ``E* - E_p`` against the
+nominal physics; no posterior, no ensemble, no conformal step.
+``HybridModel(**PAPER_CONFIG)``."""
+
+VAL_FRACTION = 0.15 / 0.85
+"""Default validation share: the paper's 225 validation trips of 1,050 + 225."""
+
+_PREDICT_BLOCK_ROWS = 65_536
+_PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
+_MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
+
+
+class HybridModel(ProbabilisticMixin, BaseEstimator):
+    """Hybrid physics + residual-network predictor of trip energy and final SoC.
+
+    Parameters
+    ----------
+    vehicle : VehicleParams, optional
+        Vehicle of the physics model (default: the paper's).
+    features : sequence of str, optional
+        Network inputs, a subset of :data:`hybridev.learning.features.FEATURE_NAMES`
+        (default: all 11; subsets are for ablations).
+    n_members : int
+        Ensemble size (default 5, the deep ensemble; 1 = the paper's single
+        network).
+    heteroscedastic : bool
+        Give each member a variance output, trained by Gaussian NLL (default
+        True; False + ``n_members=1`` is the paper's MSE network).
+    hidden : tuple of int
+        Hidden-layer widths.
+    dropout : float
+        Dropout probability after hidden layers 2 and 3.
+    max_epochs, patience, batch_size : int
+        Training length, early-stopping patience (epochs), mini-batch size.
+    learning_rate, lr_decay, lr_decay_every
+        Adam step size, decayed by ``lr_decay`` every ``lr_decay_every`` epochs.
+    weight_decay : float
+        The paper's ``lambda`` in ``MSE + lambda ||theta||^2``.
+    val_fraction : float
+        Share of the measured trips held out for early stopping, in [0, 1);
+        0 trains all ``max_epochs`` epochs on every trip.
+    n_steps : int
+        Intervals per synthesised speed trace of the physics model.
+    physics_seed : int
+        Seed of the physics speed traces (see :func:`hybridev.simulate`).
+    calibrate_physics : bool
+        Sample a posterior over the physics parameters with emcee
+        (:func:`hybridev.bayes.sampler.calibrate_physics`) before training the
+        network; ``energy_kwh_physics`` is then the calibrated physics
+        (posterior median). Default True.
+    n_posterior_draws : int
+        Posterior draws per prediction (physics-parameter uncertainty).
+    conformal_fraction : float
+        Share of the measured trips held out of all fitting for the
+        split-conformal calibration of intervals, in [0, 1); 0 leaves the
+        intervals uncalibrated.
+    missing_mode : str or DrivingProfile
+        Physics of trips without ``mode`` in the calibration: ``"infer"``
+        (mixture over the profiles with sampled weights), ``"marginalize"``
+        (equal weights), a mode name, or a profile (e.g. efficiency
+        multiplier 1 for logged traces, whose driving style is in the trace).
+    residual_target : {"relative", "absolute"}
+        What the networks learn. ``"absolute"`` is the paper's ``dE = E* -
+        E_p`` in kWh. ``"relative"`` (default) learns ``dE / s`` with the scale
+        ``s = max(|E_p|, 0.05 kWh/km * d)``: unmodelled effects are mostly
+        proportional to the physics energy, so a relative residual carries
+        over to trips longer than the training ones and weights short trips
+        as MAPE does. Predictions are ``E_p + s * dE_rel`` either way.
+    physics_params : tuple of str
+        Physics parameters sampled by the calibration (see
+        :data:`hybridev.physics.stats.STAT_PARAMS`).
+
+    Attributes
+    ----------
+    net_ : EnsembleMLP
+        The fitted network (eval mode).
+    feature_names_ : tuple of str
+    feature_mean_, feature_std_ : numpy.ndarray, shape (n_features,)
+        Standardisation of the inputs, in the units of the features.
+    target_mean_, target_std_ : float, kWh
+        Standardisation of the network target (the residual, kWh).
+    n_features_in_ : int
+    n_parameters_ : int
+        Trainable parameters per member (3,393 for the paper's network on
+        the 11 listed inputs; 3,329 with 10).
+    history_ : dict
+        Per-epoch ``train_loss``/``val_loss`` (n_epochs, n_members),
+        ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
+    fit_info_ : dict
+        Trip counts, seed, fit time and validation-set errors.
+    posterior_ : PhysicsPosterior or None
+        Physics posterior (``calibrate_physics=True``).
+    conformal_ : NormalizedConformal or None
+        Calibration residuals of the conformal step (``conformal_fraction > 0``).
+
+    Examples
+    --------
+    >>> from hybridev import make_trips, simulate
+    >>> t = simulate(make_trips(40, seed=0), n_steps=100)
+    >>> t["energy_kwh"] = t["energy_kwh_physics"] * 1.1
+    >>> m = HybridModel(**PAPER_CONFIG, max_epochs=3, n_steps=100).fit(t, seed=0)
+    >>> out = m.predict(t.drop(columns=["energy_kwh"]))
+    >>> bool((out.energy_kwh_pred >= 0).all()), m.n_parameters_
+    (True, 3393)
+
+    The default (probabilistic) model also gives intervals, see
+    :meth:`predict_interval`.
+    """
+
+    _residual = True  # target E* - E_p; PureML sets False (target E*)
+    _fallback_to_physics = True
+    _default_features = FEATURE_NAMES
+
+    def __init__(self, vehicle: VehicleParams | None = None, *,
+                 features: Sequence[str] | None = None, n_members: int = 5,
+                 heteroscedastic: bool = True, hidden: tuple[int, ...] = (64, 32, 16),
+                 dropout: float = 0.2, max_epochs: int = 200, patience: int = 20,
+                 batch_size: int = 32, learning_rate: float = 1e-3, lr_decay: float = 0.95,
+                 lr_decay_every: int = 50, weight_decay: float = 1e-4,
+                 val_fraction: float = VAL_FRACTION, n_steps: int = 1000,
+                 physics_seed: int = 0, calibrate_physics: bool = True,
+                 n_posterior_draws: int = 200, conformal_fraction: float = 0.15,
+                 missing_mode: str | DrivingProfile = "infer",
+                 residual_target: str = "relative",
+                 physics_params: tuple[str, ...] = DEFAULT_PARAMS) -> None:
+        self.vehicle = vehicle
+        self.features = features
+        self.n_members = n_members
+        self.heteroscedastic = heteroscedastic
+        self.hidden = hidden
+        self.dropout = dropout
+        self.max_epochs = max_epochs
+        self.patience = patience
+        self.batch_size = batch_size
+        self.learning_rate = learning_rate
+        self.lr_decay = lr_decay
+        self.lr_decay_every = lr_decay_every
+        self.weight_decay = weight_decay
+        self.val_fraction = val_fraction
+        self.n_steps = n_steps
+        self.physics_seed = physics_seed
+        self.calibrate_physics = calibrate_physics
+        self.n_posterior_draws = n_posterior_draws
+        self.conformal_fraction = conformal_fraction
+        self.missing_mode = missing_mode
+        self.residual_target = residual_target
+        self.physics_params = physics_params
+
+    # -- configuration -------------------------------------------------------------------
+    def _vehicle(self) -> VehicleParams:
+        if self.vehicle is None:
+            return _PAPER_VEHICLE
+        if not isinstance(self.vehicle, VehicleParams):
+            raise ValueError(f"{type(self).__name__}.vehicle must be a VehicleParams or None; "
+                             f"got {type(self.vehicle).__name__}")
+        return self.vehicle
+
+    def _feature_names(self) -> tuple[str, ...]:
+        feats = self._default_features if self.features is None else self.features
+        return check_feature_names(feats, what=f"{type(self).__name__}.features")
+
+    def _check_params(self) -> None:
+        self._vehicle()
+        o = type(self).__name__
+        self._feature_names()
+        _check_range(f"{o}.n_members", self.n_members, 1, 100, integer=True)
+        if not isinstance(self.heteroscedastic, bool | np.bool_):
+            raise ValueError(f"{o}.heteroscedastic={self.heteroscedastic!r} must be a bool")
+        h = self.hidden
+        if isinstance(h, str) or not isinstance(h, Sequence) or len(h) == 0:
+            raise ValueError(f"{o}.hidden={h!r} must be a non-empty sequence of widths")
+        for w in h:
+            _check_range(f"{o}.hidden", w, 1, 4096, integer=True)
+        _check_range(f"{o}.dropout", self.dropout, 0.0, 1.0, hi_open=True)
+        _check_range(f"{o}.max_epochs", self.max_epochs, 1, 100_000, integer=True)
+        _check_range(f"{o}.patience", self.patience, 1, 100_000, integer=True)
+        _check_range(f"{o}.batch_size", self.batch_size, 1, 1_000_000, integer=True)
+        _check_range(f"{o}.learning_rate", self.learning_rate, 0.0, 1.0, lo_open=True)
+        _check_range(f"{o}.lr_decay", self.lr_decay, 0.0, 1.0, lo_open=True)
+        _check_range(f"{o}.lr_decay_every", self.lr_decay_every, 1, 100_000, integer=True)
+        _check_range(f"{o}.weight_decay", self.weight_decay, 0.0, 1.0)
+        _check_range(f"{o}.val_fraction", self.val_fraction, 0.0, 1.0, hi_open=True)
+        _check_range(f"{o}.n_steps", self.n_steps, 8, 1_000_000, integer=True)
+        _check_range(f"{o}.physics_seed", self.physics_seed, 0, 2**63 - 1, integer=True)
+        if not isinstance(self.calibrate_physics, bool | np.bool_):
+            raise ValueError(f"{o}.calibrate_physics={self.calibrate_physics!r} must be a bool")
+        _check_range(f"{o}.n_posterior_draws", self.n_posterior_draws, 1, 100_000, integer=True)
+        _check_range(f"{o}.conformal_fraction", self.conformal_fraction, 0.0, 0.9)
+        allowed = ("infer", "marginalize", *PROFILES)
+        if not (isinstance(self.missing_mode, DrivingProfile) or self.missing_mode in allowed):
+            raise ValueError(f"{o}.missing_mode={self.missing_mode!r}; allowed: {list(allowed)} "
+                             "or a DrivingProfile")
+        if self.residual_target not in ("relative", "absolute"):
+            raise ValueError(f"{o}.residual_target={self.residual_target!r}; allowed: "
+                             "'relative', 'absolute'")
+        bad = [p for p in self.physics_params if p not in STAT_PARAMS]
+        if bad or len(self.physics_params) == 0:
+            raise ValueError(f"{o}.physics_params={self.physics_params!r}; allowed: a non-empty "
+                             f"subset of {list(STAT_PARAMS)}")
+        spread = (self.n_members > 1 or self.heteroscedastic
+                  or (self.calibrate_physics and self._residual))
+        if self.conformal_fraction > 0 and not spread:
+            raise ValueError(
+                f"{o}.conformal_fraction={self.conformal_fraction!r} needs a predictive spread "
+                "to calibrate, but n_members=1, heteroscedastic=False and no physics posterior "
+                "give none: set conformal_fraction=0 (the paper's point model) or use "
+                "n_members >= 2, heteroscedastic=True or calibrate_physics=True")
+
+    def __sklearn_is_fitted__(self) -> bool:
+        return hasattr(self, "net_")
+
+    def _require_fitted(self) -> None:
+        if not hasattr(self, "net_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call "
+                                 "fit(measured_trips) first (or load a fitted model)")
+
+    # -- building blocks (also used by the probabilistic layer) ---------------------------
+    def _physics(self, trips: pd.DataFrame, traces: LoggedTraces | None = None
+                 ) -> pd.DataFrame:
+        """Validated trips with the physics columns.
+
+        ``trips`` is a trip table whose ``mode`` may be missing or empty. With
+        a physics posterior the physics is the posterior median; trips with a
+        logged trace in ``traces`` (by ``trip_id``) use it instead of a
+        synthesised one. Without a posterior, unknown modes are simulated as
+        ``"normal"`` (or ``missing_mode`` when it is a profile or mode name).
+        Returns simulate-like columns with ``mode`` normalised (``None``
+        where unknown).
+        """
+        if not isinstance(trips, pd.DataFrame):
+            raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
+        if getattr(self, "posterior_", None) is not None:
+            return self._posterior_physics(self._validated(trips), 0, 0, traces)[0]
+        if traces is not None:
+            t = self._validated(trips)
+            mm = self.missing_mode if self.missing_mode not in ("infer", "marginalize") \
+                else "normal"
+            st = trip_stats(t, self._vehicle(), traces=traces, n_steps=int(self.n_steps),
+                            seed=int(self.physics_seed), missing_mode=mm)
+            return with_physics_columns(t, energy_from_stats(st), st.max_speed_kmh,
+                                  self._vehicle().battery_capacity_kwh)
+        modes = normalize_modes(trips.get("mode"), len(trips))
+        out = simulate(trips.assign(mode=physics_modes(modes)), self._vehicle(),
+                       n_steps=int(self.n_steps), seed=int(self.physics_seed))
+        out["mode"] = modes  # simulate raises on any bad row, so rows are unchanged
+        return out
+
+    def _target_scale(self, energy_physics_kwh, distance_km) -> np.ndarray:
+        """Scale of the network target: 1 (absolute) or ``max(|E_p|, 0.05 d)`` kWh."""
+        e = np.asarray(energy_physics_kwh, dtype=float)
+        if self.residual_target == "absolute" or not self._residual:
+            return np.ones_like(e)
+        return np.maximum(np.abs(e), _MIN_SCALE_KWH_PER_KM * np.asarray(distance_km, float))
+
+    def _validated(self, trips: pd.DataFrame) -> pd.DataFrame:
+        """Validated prediction trips (``mode`` ``None`` where unknown)."""
+        if not isinstance(trips, pd.DataFrame):
+            raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
+        return validate_prediction_trips(trips)
+
+    def _features(self, physics_table: pd.DataFrame) -> np.ndarray:
+        """Standardised network inputs (n_trips, n_features), float32."""
+        x = trip_features(physics_table, self.feature_names_)
+        return ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
+
+    def _residual_moments(self, x: np.ndarray, scale=1.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """Per-member network output in kWh.
+
+        Parameters
+        ----------
+        x : numpy.ndarray, shape (n_trips, n_features)
+            Standardised inputs from :meth:`_features`.
+        scale : float or numpy.ndarray (n_trips,), kWh per target unit
+            :meth:`_target_scale` of the trips (1 for an absolute target).
+
+        Returns
+        -------
+        mean : numpy.ndarray, shape (n_members, n_trips), kWh
+            Each member's residual (``PureML``: energy) prediction.
+        var : numpy.ndarray, shape (n_members, n_trips), kWh^2, or None
+            Each member's predicted noise variance (``heteroscedastic=True``).
+        """
+        self._require_fitted()
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        means, variances = [], []
+        with torch.inference_mode():  # blocks of rows bound the (M, rows, 64) activations
+            for start in range(0, max(len(x), 1), _PREDICT_BLOCK_ROWS):
+                m, v = self.net_(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
+                means.append(m.numpy())
+                variances.append(None if v is None else v.numpy())
+        scale = np.asarray(scale, dtype=float)
+        mean = (np.concatenate(means, axis=1).astype(float) * self.target_std_
+                + self.target_mean_) * scale
+        if variances[0] is None:
+            return mean, None
+        return mean, np.concatenate(variances, axis=1).astype(float) * (self.target_std_ * scale)**2
+
+    def _combine(self, energy_physics: np.ndarray, network_mean: np.ndarray) -> np.ndarray:
+        """Point energy (kWh) from the physics and the members' mean output."""
+        if not self._residual:
+            return np.maximum(network_mean, 0.0)
+        return np.maximum(energy_physics + network_mean, np.minimum(energy_physics, 0.0))
+
+    # -- public API ---------------------------------------------------------------------
+    def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
+            timeseries=None, progress: Callable[[int], None] | None = None) -> HybridModel:
+        """Fit the residual network on measured trips.
+
+        Parameters
+        ----------
+        measured_trips : pandas.DataFrame
+            A measured-trip table (:func:`hybridev.data.measured.validate_measured_trips`):
+            trip columns plus ``energy_kwh`` (kWh) and/or ``soc_final``.
+        seed : int
+            Seeds the validation split, initialisation, data order and dropout.
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id``: the physics of those trips
+            (calibration, features, residuals) runs on the real trace. A
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its own traces.
+        progress : callable, optional
+            Called with the number of finished epochs.
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        ValueError
+            On an invalid parameter or row (naming field, value and range).
+        """
+        self._check_params()
+        _check_range("seed", seed, 0, 2**63 - 1, integer=True)  # of fit
+        t0 = time.perf_counter()
+        if isinstance(measured_trips, MeasuredTrips):
+            traces = measured_trips.traces if timeseries is None else as_traces(timeseries)
+            measured_trips = measured_trips.trips
+        else:
+            traces = as_traces(timeseries)
+        good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
+        n = len(good)
+        split_ss, torch_ss = np.random.SeedSequence(int(seed)).spawn(2)
+        order = np.random.default_rng(split_ss).permutation(n)
+        n_cal = round(self.conformal_fraction * n) if self.conformal_fraction > 0 else 0
+        rest = n - n_cal
+        n_val = max(round(self.val_fraction * rest), 1) if self.val_fraction > 0 else 0
+        if rest - n_val < 1 or (self.conformal_fraction > 0 and n_cal < 1):
+            raise ValueError(f"measured trips: {n} valid row(s) are too few to fit with "
+                             f"val_fraction={self.val_fraction!r} and conformal_fraction="
+                             f"{self.conformal_fraction!r}")
+        cal_idx = np.sort(order[:n_cal])
+        val_idx = np.sort(order[n_cal:n_cal + n_val])
+        tr_idx = np.sort(order[n_cal + n_val:])
+        for attr in ("posterior_", "conformal_"):
+            setattr(self, attr, None)
+        if self._residual:  # the calibration trips stay out of the physics posterior too
+            self._fit_posterior(good.iloc[np.sort(order[n_cal:])], seed, traces)
+        phys = self._physics(good, traces)
+        names = self._feature_names()
+        x = trip_features(phys, names)
+        e_meas = good["energy_kwh"].to_numpy(float)
+        e_phys = phys["energy_kwh_physics"].to_numpy(float)
+        scale = self._target_scale(e_phys, good["distance_km"].to_numpy(float))
+        y = (e_meas - e_phys) / scale if self._residual else e_meas
+        self.feature_names_ = names
+        self.n_features_in_ = len(names)
+        self.feature_mean_, self.feature_std_ = fit_standardizer(x[tr_idx])
+        self.target_mean_ = float(np.mean(y[tr_idx]))
+        sd = float(np.std(y[tr_idx]))
+        self.target_std_ = sd if sd > 1e-12 else 1.0
+        xs = ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
+        ys = ((y - self.target_mean_) / self.target_std_).astype(np.float32)
+        net, hist = train_ensemble(
+            xs[tr_idx], ys[tr_idx], xs[val_idx] if n_val else None,
+            ys[val_idx] if n_val else None, n_members=int(self.n_members),
+            hidden=tuple(int(h) for h in self.hidden), dropout=float(self.dropout),
+            heteroscedastic=bool(self.heteroscedastic), max_epochs=int(self.max_epochs),
+            patience=int(self.patience), batch_size=int(self.batch_size),
+            learning_rate=float(self.learning_rate), weight_decay=float(self.weight_decay),
+            lr_decay=float(self.lr_decay), lr_decay_every=int(self.lr_decay_every),
+            seed=int(torch_ss.generate_state(1)[0]), progress=progress)
+        self.net_ = net
+        self.history_ = hist
+        self.n_parameters_ = net.n_parameters_per_member
+        if n_cal:
+            _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed), traces=traces)
+            self.conformal_ = NormalizedConformal.fit(e_meas[cal_idx], dist.mean(), dist.std())
+        info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
+                "seed": int(seed),
+                "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
+                "n_parameters_per_member": self.n_parameters_}
+        if n_val:
+            dev = self._residual_moments(xs[val_idx], scale[val_idx])[0].mean(0)
+            pred = self._combine(e_phys[val_idx], dev)
+            info["val_mae_kwh_physics"] = float(np.mean(np.abs(e_meas[val_idx] - e_phys[val_idx])))
+            info["val_mae_kwh_model"] = float(np.mean(np.abs(e_meas[val_idx] - pred)))
+        info["fit_seconds"] = round(time.perf_counter() - t0, 3)
+        self.fit_info_ = info
+        return self
+
+    def predict(self, trips: pd.DataFrame, *, timeseries=None) -> pd.DataFrame:
+        """Predict trip energy and final SoC.
+
+        Parameters
+        ----------
+        trips : pandas.DataFrame
+            A trip table; ``mode`` may be missing or ``None`` and ``hour``
+            missing (see the module docstring).
+        timeseries : LoggedTraces or pandas.DataFrame, optional
+            Logged speed traces by ``trip_id`` (see :meth:`fit`).
+
+        Returns
+        -------
+        pandas.DataFrame
+            A copy of ``trips`` with :func:`hybridev.simulate`'s columns
+            (``energy_kwh_physics``, ``soc_final_physics``, ``max_speed_kmh``,
+            ``kwh_per_km_physics``) plus ``energy_kwh_pred`` (kWh, the mean
+            over members) and ``soc_final_pred`` (``s0 - E/C`` clipped to [0, 1]).
+            With a physics posterior (``calibrate_physics=True``) the physics
+            columns are those of the posterior-median parameters.
+
+        Warns
+        -----
+        PhysicsFallbackWarning
+            When the model is not fitted: ``energy_kwh_pred`` is the physics.
+        """
+        if not hasattr(self, "net_") and not self._fallback_to_physics:
+            self._require_fitted()
+        self._check_params()
+        out = self._physics(trips, as_traces(timeseries))  # validates the trips
+        e_phys = out["energy_kwh_physics"].to_numpy(float)
+        if hasattr(self, "net_"):
+            scale = self._target_scale(e_phys, out["distance_km"].to_numpy(float))
+            energy = self._combine(e_phys,
+                                   self._residual_moments(self._features(out), scale)[0].mean(0))
+        else:
+            warnings.warn(f"{type(self).__name__} is not fitted: energy_kwh_pred is the physics "
+                          "prediction only (energy_kwh_physics); fit it on measured trips to "
+                          "add the learned residual", PhysicsFallbackWarning, stacklevel=2)
+            energy = e_phys
+        out["energy_kwh_pred"] = energy
+        out["soc_final_pred"] = soc_from_energy(out["soc_initial"].to_numpy(float), energy,
+                                                self._vehicle().battery_capacity_kwh)
+        return out
+
+    # -- persistence ----------------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> None:
+        """Save to a directory (JSON + ``.npz``, no pickle), atomically.
+
+        See :mod:`hybridev.learning.persist` for the layout. An unfitted model is saved
+        without a network and predicts the physics (with a warning) after
+        :meth:`load`. A saved model takes about 18 kB for the paper's network
+        and 72 kB for 5 heteroscedastic members
+        (``benchmarks/results/bench_hybrid.md``).
+
+        Examples
+        --------
+        >>> import tempfile
+        >>> d = tempfile.mkdtemp() + "/model"
+        >>> HybridModel(n_steps=100).save(d)
+        >>> HybridModel.load(d).n_steps
+        100
+        """
+        save_model(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> HybridModel:
+        """Load a model saved by :meth:`save` (by the same class).
+
+        Raises
+        ------
+        ValueError
+            Naming the file and the problem (missing, corrupted, another
+            format or major version, wrong feature names or shapes).
+        """
+        return load_model(cls, path)

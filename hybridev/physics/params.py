@@ -1,0 +1,304 @@
+"""Vehicle and driving-profile parameter sets.
+
+Both are frozen dataclasses validated at construction. Make variants with
+:func:`dataclasses.replace`, which re-runs the validation::
+
+    >>> import dataclasses
+    >>> from hybridev import VehicleParams
+    >>> heavy = dataclasses.replace(VehicleParams(), mass_kg=2200.0)
+    >>> heavy.mass_kg
+    2200.0
+
+All quantities are SI unless the field name says otherwise (``_kw``, ``_kwh``,
+``_c`` for degrees Celsius).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+__all__ = ["PROFILES", "DrivingProfile", "ProfileLike", "VehicleParams", "get_profile"]
+
+
+def _check_range(owner: str, name: str, value: float, lo: float, hi: float,
+                 *, lo_open: bool = False, hi_open: bool = False) -> None:
+    """Raise a ValueError naming the field, value and allowed range."""
+    if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
+        value = value.item()  # numpy scalar -> Python number, for a plain message
+    try:
+        ok = not isinstance(value, bool) and math.isfinite(value)
+    except TypeError:
+        ok = False
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+    if not ok:
+        lb = "(" if lo_open else "["
+        rb = ")" if hi_open else "]"
+        raise ValueError(f"{owner}.{name}={value!r} is outside the allowed range {lb}{lo}, {hi}{rb}")
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Physical parameters of one battery-electric vehicle.
+
+    Defaults are the paper's vehicle table (Table "Vehicle and Environmental
+    Parameters", Section II-C) plus its auxiliary-power model (Section II-C):
+    base auxiliary 0.5 kW and HVAC power by ambient-temperature band.
+
+    Parameters
+    ----------
+    battery_capacity_kwh : float
+        Usable battery capacity ``C`` in kWh.
+    mass_kg : float
+        Test mass ``m`` in kg (vehicle plus load).
+    drag_coefficient : float
+        Aerodynamic drag coefficient ``C_d`` (dimensionless).
+    frontal_area_m2 : float
+        Frontal area ``A`` in m^2.
+    rolling_resistance_coef : float
+        Rolling-resistance coefficient ``C_r`` (dimensionless).
+    drivetrain_efficiency : float
+        Battery-to-wheel efficiency ``eta_d`` in (0, 1].
+    air_density_kg_m3 : float
+        Air density ``rho`` in kg/m^3.
+    gravity_mps2 : float
+        Gravitational acceleration ``g`` in m/s^2.
+    aux_base_kw : float
+        Base auxiliary power ``P_b`` in kW.
+    hvac_kw : tuple of 4 float
+        HVAC power in kW for ambient bands ``T < 0``, ``0 <= T < 15``,
+        ``15 <= T <= 25`` and ``T > 25`` degC (the paper's ``P_c(T)``).
+    linear_drag_n_per_mps : float
+        Road-load term linear in speed, in N per (m/s). Zero in the paper's
+        model; non-zero when built from coast-down coefficients.
+    source : str
+        Where the values come from (free text, not compared).
+
+    Examples
+    --------
+    >>> v = VehicleParams()
+    >>> round(v.drag_area_m2, 3)
+    0.552
+    >>> VehicleParams(mass_kg=-1)
+    Traceback (most recent call last):
+    ...
+    ValueError: VehicleParams.mass_kg=-1 is outside the allowed range (0.0, 100000.0]
+    """
+
+    battery_capacity_kwh: float = 75.0
+    mass_kg: float = 1800.0
+    drag_coefficient: float = 0.24
+    frontal_area_m2: float = 2.3
+    rolling_resistance_coef: float = 0.01
+    drivetrain_efficiency: float = 0.90
+    air_density_kg_m3: float = 1.225
+    gravity_mps2: float = 9.81
+    aux_base_kw: float = 0.5
+    hvac_kw: tuple[float, float, float, float] = (2.0, 1.0, 0.5, 2.5)
+    linear_drag_n_per_mps: float = 0.0
+    source: str = field(
+        default="Paper, Sec. II-C: vehicle table (EPA/manufacturer-based) and P_b, P_c(T)",
+        compare=False,
+    )
+
+    def __post_init__(self) -> None:
+        o = "VehicleParams"
+        _check_range(o, "battery_capacity_kwh", self.battery_capacity_kwh, 0.0, 1000.0, lo_open=True)
+        _check_range(o, "mass_kg", self.mass_kg, 0.0, 100000.0, lo_open=True)
+        _check_range(o, "drag_coefficient", self.drag_coefficient, 0.0, 2.0)
+        _check_range(o, "frontal_area_m2", self.frontal_area_m2, 0.0, 20.0)
+        _check_range(o, "rolling_resistance_coef", self.rolling_resistance_coef, 0.0, 0.1)
+        _check_range(o, "drivetrain_efficiency", self.drivetrain_efficiency, 0.0, 1.0, lo_open=True)
+        _check_range(o, "air_density_kg_m3", self.air_density_kg_m3, 0.0, 3.0)
+        _check_range(o, "gravity_mps2", self.gravity_mps2, 0.0, 30.0)
+        _check_range(o, "aux_base_kw", self.aux_base_kw, 0.0, 50.0)
+        _check_range(o, "linear_drag_n_per_mps", self.linear_drag_n_per_mps, 0.0, 1000.0)
+        try:
+            hv = tuple(float(x) for x in self.hvac_kw)
+        except (TypeError, ValueError):
+            hv = ()
+        if len(hv) != 4:
+            raise ValueError(f"VehicleParams.hvac_kw={self.hvac_kw!r} must have 4 values "
+                             "(T<0, 0<=T<15, 15<=T<=25, T>25 degC)")
+        for i, x in enumerate(hv):
+            _check_range(o, f"hvac_kw[{i}]", x, 0.0, 50.0)
+        object.__setattr__(self, "hvac_kw", hv)
+
+    @property
+    def drag_area_m2(self) -> float:
+        """Drag area ``C_d * A`` in m^2."""
+        return self.drag_coefficient * self.frontal_area_m2
+
+    @classmethod
+    def from_coastdown(cls, a_n: float, b_n_per_kmh: float, c_n_per_kmh2: float,
+                       mass_kg: float, *, frontal_area_m2: float = 2.3,
+                       air_density_kg_m3: float = 1.225, gravity_mps2: float = 9.81,
+                       **kwargs) -> VehicleParams:
+        """Build parameters from coast-down road-load coefficients.
+
+        The road load ``F = A + B v + C v^2`` (``v`` in km/h, as printed in
+        type-approval and EPA test documents) maps exactly onto this model:
+        ``C_r = A / (m g)``, ``linear_drag = 3.6 B`` N/(m/s) and
+        ``C_d A = 2 (3.6^2 C) / rho``. ``frontal_area_m2`` only splits the drag
+        area into ``C_d`` and ``A``; energy depends on their product.
+
+        Parameters
+        ----------
+        a_n : float
+            Constant term ``A`` in N.
+        b_n_per_kmh : float
+            Linear term ``B`` in N/(km/h).
+        c_n_per_kmh2 : float
+            Quadratic term ``C`` in N/(km/h)^2.
+        mass_kg : float
+            Test mass in kg.
+        frontal_area_m2, air_density_kg_m3, gravity_mps2 : float
+            Used for the conversion; see above.
+        **kwargs
+            Any other :class:`VehicleParams` field (capacity, efficiency, aux).
+
+        Returns
+        -------
+        VehicleParams
+
+        Examples
+        --------
+        >>> v = VehicleParams.from_coastdown(179.4, 0.28, 0.0235, 1919.0, battery_capacity_kwh=60)
+        >>> round(v.rolling_resistance_coef, 4), round(v.drag_area_m2, 3)
+        (0.0095, 0.497)
+        """
+        for name, val in (("a_n", a_n), ("b_n_per_kmh", b_n_per_kmh),
+                          ("c_n_per_kmh2", c_n_per_kmh2)):
+            _check_range("from_coastdown", name, float(val), 0.0, 1e4)
+        _check_range("from_coastdown", "mass_kg", float(mass_kg), 0.0, 1e5, lo_open=True)
+        _check_range("from_coastdown", "frontal_area_m2", float(frontal_area_m2), 0.0, 20.0,
+                     lo_open=True)
+        cda = 2.0 * c_n_per_kmh2 * 3.6**2 / air_density_kg_m3
+        kwargs.setdefault("source", f"coast-down A={a_n} N, B={b_n_per_kmh} N/(km/h), "
+                                    f"C={c_n_per_kmh2} N/(km/h)^2, m={mass_kg} kg")
+        return cls(
+            mass_kg=float(mass_kg),
+            rolling_resistance_coef=float(a_n) / (float(mass_kg) * gravity_mps2),
+            linear_drag_n_per_mps=3.6 * float(b_n_per_kmh),
+            drag_coefficient=cda / frontal_area_m2,
+            frontal_area_m2=float(frontal_area_m2),
+            air_density_kg_m3=air_density_kg_m3,
+            gravity_mps2=gravity_mps2,
+            **kwargs,
+        )
+
+
+@dataclass(frozen=True)
+class DrivingProfile:
+    """A driving-behaviour profile (the paper's Table "Driving Profiles").
+
+    Parameters
+    ----------
+    name : str
+        Profile name (``"eco"``, ``"normal"``, ``"aggressive"`` or your own).
+    max_accel_mps2 : float
+        Largest |acceleration| a synthesised trace may use, m/s^2.
+    efficiency_multiplier : float
+        Multiplies battery traction power (>1 means less efficient driving).
+    regen_efficiency : float
+        Fraction of negative wheel power returned to the battery, in [0, 1].
+    aux_kw : float
+        Mode-specific auxiliary power ``P_m`` in kW.
+    phase_fractions : tuple of 3 float
+        Share of time spent accelerating, cruising and braking; sums to 1.
+    pke_mps2 : float
+        Target positive kinetic energy per metre (m/s^2) of synthesised
+        traces: the standard measure of how much speed variation a driver
+        adds. Not in the paper; chosen so that the paper's baseline-scenario
+        table is reproduced (see ``evaluation/physics_reproduction.md``).
+    cycle_period_s : float
+        Nominal duration of one accelerate-cruise-brake cycle, s.
+    amplitude_cv : float
+        Coefficient of variation of the per-cycle speed-swing amplitude: the
+        random speed perturbation, growing with aggressiveness.
+    source : str
+        Where the values come from (free text, not compared).
+
+    Examples
+    --------
+    >>> from hybridev import PROFILES
+    >>> PROFILES["eco"].regen_efficiency
+    0.75
+    """
+
+    name: str
+    max_accel_mps2: float
+    efficiency_multiplier: float
+    regen_efficiency: float
+    aux_kw: float
+    phase_fractions: tuple[float, float, float]
+    pke_mps2: float = 0.15
+    cycle_period_s: float = 40.0
+    amplitude_cv: float = 0.3
+    source: str = field(default="user-defined", compare=False)
+
+    def __post_init__(self) -> None:
+        o = f"DrivingProfile({self.name!r})"
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"DrivingProfile.name={self.name!r} must be a non-empty string")
+        _check_range(o, "max_accel_mps2", self.max_accel_mps2, 0.0, 15.0, lo_open=True)
+        _check_range(o, "efficiency_multiplier", self.efficiency_multiplier, 0.0, 5.0, lo_open=True)
+        _check_range(o, "regen_efficiency", self.regen_efficiency, 0.0, 1.0)
+        _check_range(o, "aux_kw", self.aux_kw, 0.0, 50.0)
+        _check_range(o, "pke_mps2", self.pke_mps2, 0.0, 5.0)
+        _check_range(o, "cycle_period_s", self.cycle_period_s, 0.0, 3600.0, lo_open=True)
+        _check_range(o, "amplitude_cv", self.amplitude_cv, 0.0, 2.0)
+        try:
+            pf = tuple(float(x) for x in self.phase_fractions)
+        except (TypeError, ValueError):
+            pf = ()
+        if len(pf) != 3 or any(not (0.0 < x < 1.0) for x in pf) or abs(sum(pf) - 1.0) > 1e-6:
+            raise ValueError(f"{o}.phase_fractions={self.phase_fractions!r} must be three values "
+                             "in (0, 1) (accel, cruise, brake) that sum to 1")
+        object.__setattr__(self, "phase_fractions", pf)
+
+
+_PAPER = "Paper, Table 'Parameters of Three Typical Driving Profiles'"
+_TUNED = "; pke/cycle/cv: hybridev, tuned to the paper's baseline-scenario table"
+
+PROFILES: Mapping[str, DrivingProfile] = MappingProxyType({
+    "eco": DrivingProfile("eco", 1.5, 0.85, 0.75, 0.0, (0.20, 0.65, 0.15),
+                          pke_mps2=0.10, cycle_period_s=60.0, amplitude_cv=0.15,
+                          source=_PAPER + _TUNED),
+    "normal": DrivingProfile("normal", 2.5, 1.00, 0.65, 0.5, (0.30, 0.50, 0.20),
+                             pke_mps2=0.16, cycle_period_s=45.0, amplitude_cv=0.30,
+                             source=_PAPER + _TUNED),
+    "aggressive": DrivingProfile("aggressive", 4.0, 1.35, 0.50, 1.5, (0.40, 0.35, 0.25),
+                                 pke_mps2=0.17, cycle_period_s=30.0, amplitude_cv=0.45,
+                                 source=_PAPER + _TUNED),
+})
+"""The paper's three driving profiles, keyed by mode name (read-only)."""
+
+
+def get_profile(mode: str | DrivingProfile) -> DrivingProfile:
+    """Return the profile for a mode name, or the profile itself.
+
+    Raises
+    ------
+    ValueError
+        If the name is not a key of :data:`PROFILES`.
+
+    Examples
+    --------
+    >>> get_profile("normal").efficiency_multiplier
+    1.0
+    """
+    if isinstance(mode, DrivingProfile):
+        return mode
+    try:
+        return PROFILES[mode]
+    except (KeyError, TypeError):
+        raise ValueError(f"mode={mode!r} is not a known driving profile; "
+                         f"allowed: {sorted(PROFILES)}") from None
+
+
+ProfileLike = DrivingProfile | str | Sequence[DrivingProfile | str]
+"""A driving profile, its name, or one per trip."""

@@ -1,0 +1,296 @@
+"""Building the sufficient statistics of trips: from synthesised or logged speed traces.
+
+See :mod:`hybridev.physics.stats` for what the statistics are and how energy
+follows from them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.kinematics import profile_table
+from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
+from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
+from hybridev.physics.traces import LoggedTraces
+from hybridev.physics.trips import _blocks
+
+__all__ = ["stats_from_logs", "stats_from_traces", "trip_stats"]
+
+
+_SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 cache)
+
+
+def _components(vm, acc, cos_th, sin_th, dt, veh: VehicleParams):
+    """Per-interval (roll, aero, lin, rest) energies in kWh and the sign of P_w."""
+    m, g = veh.mass_kg, veh.gravity_mps2
+    vdt = vm * dt / _J_PER_KWH
+    roll = (m * g) * cos_th * vdt
+    aero = (0.5 * veh.air_density_kg_m3) * vm * vm * vdt
+    lin = vm * vdt
+    rest = (m * g * sin_th + m * acc) * vdt
+    pw = (veh.rolling_resistance_coef * roll + veh.drag_area_m2 * aero
+          + veh.linear_drag_n_per_mps * lin + rest)
+    return (roll, aero, lin, rest), pw > 0
+
+
+def _profile_consts(profile, n: int):
+    t = profile_table(profile, n, ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
+    return t["efficiency_multiplier"], t["regen_efficiency"], t["aux_kw"]
+
+
+def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
+              log_weight=None, n_trips=None, max_speed_kmh=None) -> PhysicsStats:
+    n = len(duration_s)
+    mult, eta_r, mode_kw = _profile_consts(profile, n)
+    hvac = np.broadcast_to(hvac_power_kw(temperature_c, veh), (n,))
+    kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
+    kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
+    return PhysicsStats(
+        **kw, duration_h=np.asarray(duration_s, float) / 3600.0, hvac_kw=hvac.copy(),
+        mode_kw=mode_kw,
+        mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
+        log_weight=np.zeros(n) if log_weight is None else log_weight,
+        n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh)
+
+
+def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
+                      profile="normal", temperature_c=20.0, grade_rad=0.0) -> PhysicsStats:
+    """Statistics of uniformly sampled traces (same arguments as :func:`hybridev.trace_energy_kwh`).
+
+    Parameters
+    ----------
+    speed_mps : array_like, shape (n_samples,) or (n_trips, n_samples), m/s
+    dt_s : float or array_like (n_trips,), s
+    vehicle : VehicleParams, optional
+        Fixes the sign split and the defaults of :func:`energy_from_stats`.
+    profile : DrivingProfile, str, or sequence of them (n_trips,)
+    temperature_c : float or array_like (n_trips,), degC
+    grade_rad : float or array_like broadcastable to ``speed_mps``, rad
+
+    Returns
+    -------
+    PhysicsStats
+        One row per trace.
+
+    Examples
+    --------
+    >>> from hybridev import energy_from_stats, trace_energy_kwh
+    >>> v = [[0.0, 10.0, 20.0, 20.0, 5.0, 0.0]]
+    >>> s = stats_from_traces(v, 2.0, profile="eco")
+    >>> bool(abs(energy_from_stats(s)[0] - trace_energy_kwh(v, [2.0], profile="eco")[0]) < 1e-15)
+    True
+    >>> g = [[0.0, 0.02, 0.04, 0.0, -0.05, -0.02]]  # per-sample grade, rad
+    >>> s = stats_from_traces(v, 2.0, grade_rad=g)
+    >>> bool(abs(energy_from_stats(s)[0] / trace_energy_kwh(v, [2.0], grade_rad=g)[0] - 1) < 1e-12)
+    True
+    """
+    veh = vehicle or VehicleParams()
+    v = np.atleast_2d(np.asarray(speed_mps, dtype=float))
+    if v.ndim != 2 or v.shape[-1] < 2 or not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError("speed_mps must be finite, >= 0, shape (n_samples>=2,) or "
+                         f"(n_trips, n_samples>=2); got shape {np.shape(speed_mps)}")
+    n = v.shape[0]
+    dt = np.broadcast_to(np.asarray(dt_s, dtype=float).reshape(-1, 1), (n, 1))
+    if not np.all(np.isfinite(dt) & (dt > 0)):
+        raise ValueError(f"dt_s={dt_s!r} must be finite and > 0 seconds")
+    g = np.asarray(grade_rad, dtype=float)
+    if g.ndim == 0 or g.shape[-1] == 1:  # one grade per trip: factor it out of the sums
+        th = np.broadcast_to(g.reshape(-1, 1) if g.ndim else g, (n, 1))
+    else:
+        th = np.broadcast_to(g, v.shape)
+        th = 0.5 * (th[:, 1:] + th[:, :-1])
+    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh)
+            for i in range(0, n, _SUB)]  # cache-sized blocks of trips
+    sp, sn = ([np.concatenate([x[j][c] for x in sums]) for c in range(4)] for j in (0, 1))
+    t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
+    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
+    return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
+                     max_speed_kmh=v.max(axis=1) * 3.6)
+
+
+def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
+    """(roll, aero, lin, rest) sums over driving and braking intervals of uniform traces, kWh.
+
+    ``v`` (n, N + 1) m/s, ``dt`` (n, 1) s, ``th`` interval grades (n, 1) or (n, N) rad.
+    Hot path: the sign of ``P_w`` is that of the road-load-plus-inertia force
+    (``v > 0``; intervals with ``v = 0`` contribute nothing), and all signed
+    sums come from one batched matrix product of per-interval moments with the
+    two masks, without the full component arrays.
+    """
+    m, g = veh.mass_kg, veh.gravity_mps2
+    n, n_int = v.shape[0], v.shape[1] - 1
+    per_trip = th.shape[1] == 1
+    k = 3 if per_trip else 4  # rows of the moments: [v, (v sin,) v^2, v^3, v dv]
+    a = np.empty((n, k + 1, n_int))  # per interval, v the interval-mean speed
+    vm = np.add(v[:, 1:], v[:, :-1], out=a[:, 0])
+    vm *= 0.5
+    dv = np.subtract(v[:, 1:], v[:, :-1], out=a[:, -1])
+    cos_th, sin_th = np.cos(th), np.sin(th)
+    force = vm * (0.5 * veh.air_density_kg_m3 * veh.drag_area_m2)
+    if veh.linear_drag_n_per_mps:
+        force += veh.linear_drag_n_per_mps
+    force *= vm
+    force += (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th
+    dv *= m / dt  # inertial force
+    force += dv
+    v2 = np.multiply(vm, vm, out=a[:, k - 2])
+    np.multiply(v2, vm, out=a[:, k - 1])
+    dv *= vm
+    if not per_trip:
+        np.multiply(vm, sin_th, out=a[:, 1])
+        vm *= cos_th  # row 0 becomes v cos
+    mask = np.empty((n, 2, n_int))
+    np.greater(force, 0.0, out=mask[:, 0])
+    np.subtract(1.0, mask[:, 0], out=mask[:, 1])
+    s = np.matmul(a, mask.transpose(0, 2, 1))  # (n, k + 1, 2): sums over driving, braking
+    c = dt / _J_PER_KWH  # (n, 1)
+    if per_trip:
+        roll = (m * g) * cos_th * s[:, 0] * c
+        rest_grade = (m * g) * sin_th * s[:, 0] * c
+    else:
+        roll = (m * g) * s[:, 0] * c
+        rest_grade = (m * g) * s[:, 1] * c
+    aero = (0.5 * veh.air_density_kg_m3) * s[:, k - 1] * c
+    lin = s[:, k - 2] * c
+    rest = rest_grade + s[:, -1] * c
+    comps = (roll, aero, lin, rest)
+    return [x[:, 0] for x in comps], [x[:, 1] for x in comps]
+
+
+def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
+                    profile="normal", temperature_c=None) -> PhysicsStats:
+    """Statistics of logged traces with a per-interval ``dt`` (no resampling).
+
+    Interval ``k`` of a trip uses the mean of its two speed samples, the
+    acceleration ``(v_{k+1} - v_k) / (t_{k+1} - t_k)`` and the mean of the two
+    sample grades, exactly as :mod:`hybridev.physics.forces` does for constant ``dt``.
+
+    Parameters
+    ----------
+    traces : LoggedTraces
+    vehicle : VehicleParams, optional
+    profile : DrivingProfile, str, or sequence of them (n_trips,)
+    temperature_c : float or array_like (n_trips,), degC, optional
+        Sets the HVAC band; default: the time mean of the logged temperature,
+        else 20 degC.
+
+    Returns
+    -------
+    PhysicsStats
+        One row per trace.
+    """
+    veh = vehicle or VehicleParams()
+    start, trip = traces.intervals()
+    nxt = start + 1
+    dt = traces.t_s[nxt] - traces.t_s[start]
+    v = traces.speed_mps
+    th = 0.5 * (traces.grade_rad[start] + traces.grade_rad[nxt])
+    comps, pos = _components(0.5 * (v[start] + v[nxt]), (v[nxt] - v[start]) / dt,
+                             np.cos(th), np.sin(th), dt, veh)
+    n = len(traces)
+    sp = [np.bincount(trip, np.where(pos, c, 0.0), minlength=n) for c in comps]
+    sn = [np.bincount(trip, np.where(pos, 0.0, c), minlength=n) for c in comps]
+    if temperature_c is None:
+        temperature_c = (traces.per_trip_mean(traces.temperature_c)
+                         if traces.temperature_c is not None else 20.0)
+    t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
+    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
+    vmax = np.zeros(n)
+    np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
+    return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6)
+
+
+def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
+               traces: LoggedTraces | None = None, n_steps: int = 1000, seed: int = 0,
+               missing_mode: str | DrivingProfile = "marginalize") -> PhysicsStats:
+    """Statistics of every trip of a (measured-)trip table.
+
+    Trips whose ``trip_id`` has a logged trace use it (:func:`stats_from_logs`);
+    the others get the same synthesised trace as :func:`hybridev.simulate`
+    with the same ``n_steps`` and ``seed`` (keyed by ``trip_id``), so at the
+    nominal vehicle the energies equal ``simulate``'s ``energy_kwh_physics``.
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame
+        ``distance_km``, ``avg_speed_kmh``, ``temperature_c``, ``mode``
+        (``None`` allowed), optional ``grade_pct`` and ``trip_id``.
+    vehicle : VehicleParams, optional
+    traces : LoggedTraces, optional
+    n_steps, seed : int
+        Synthesis settings for trips without a logged trace.
+    missing_mode : "marginalize", mode name or DrivingProfile
+        Rows with no ``mode``: one row per profile of :data:`hybridev.PROFILES`
+        with equal weight (``"marginalize"``), or this one profile.
+
+    Returns
+    -------
+    PhysicsStats
+
+    Examples
+    --------
+    >>> from hybridev import energy_from_stats, make_trips, simulate
+    >>> trips = make_trips(4, seed=1)
+    >>> s = trip_stats(trips)
+    >>> e = simulate(trips).energy_kwh_physics.to_numpy()
+    >>> bool(np.allclose(energy_from_stats(s), e, rtol=1e-12))
+    True
+    """
+    veh = vehicle or VehicleParams()
+    n = len(trips)
+    mode = (trips["mode"].astype(object) if "mode" in trips.columns
+            else pd.Series([None] * n, index=trips.index, dtype=object))
+    known = (mode.notna() & (mode.astype(str).str.len() > 0)).to_numpy()
+    if isinstance(missing_mode, str) and missing_mode == "marginalize":
+        alts, n_alt = list(PROFILES), len(PROFILES)
+    else:
+        alts, n_alt = [missing_mode], 1
+    per_trip = np.where(known, 1, n_alt)
+    trip = np.repeat(np.arange(n), per_trip)
+    first = np.concatenate([[0], np.cumsum(per_trip)[:-1]])
+    k = np.arange(len(trip)) - first[trip]
+    modes = np.empty(len(trip), dtype=object)
+    kn = known[trip]
+    modes[kn] = mode.to_numpy(object)[trip[kn]]
+    alt_arr = np.empty(n_alt, dtype=object)
+    alt_arr[:] = alts
+    modes[~kn] = alt_arr[k[~kn]]
+    log_w = np.where(kn, 0.0, -np.log(n_alt))
+    temp = trips["temperature_c"].to_numpy(float)
+    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns else np.arange(n))
+    logged = np.zeros(n, dtype=bool)
+    if traces is not None and "trip_id" in trips.columns:
+        logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
+    sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
+    duration = np.zeros(len(trip))
+    vmax = np.zeros(len(trip))
+    rl = logged[trip]
+    if rl.any():
+        sl = stats_from_logs(traces.select(keys[logged].astype(object)), vehicle=veh,
+                             temperature_c=temp[logged])
+        src = np.cumsum(logged)[trip[rl]] - 1  # position among logged trips
+        for name in sums:
+            sums[name][rl] = getattr(sl, name)[src]
+        duration[rl] = sl.duration_h[src] * 3600.0
+        vmax[rl] = sl.max_speed_kmh[src]
+    if (~rl).any():
+        cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
+                "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
+                "mode": modes[~rl], "trip_id": keys[trip[~rl]]}
+        if "grade_pct" in trips.columns:
+            cols["grade_pct"] = trips["grade_pct"].to_numpy(float)[trip[~rl]]
+        syn = pd.DataFrame(cols)
+        syn_modes = modes[~rl]  # object array (pandas would iterate a string column slowly)
+        dest = np.flatnonzero(~rl)
+        for blk, v, dt, grade in _blocks(syn, n_steps, seed):
+            s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
+                                  grade_rad=grade)
+            for name in sums:
+                sums[name][dest[blk]] = getattr(s, name)
+            duration[dest[blk]] = s.duration_h * 3600.0
+            vmax[dest[blk]] = s.max_speed_kmh
+    return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
+                    duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
+                    n_trips=n, max_speed_kmh=vmax)

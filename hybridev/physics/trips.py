@@ -1,0 +1,264 @@
+"""Trip tables: the paper's experimental design and physics simulation.
+
+A *trip table* is a :class:`pandas.DataFrame` with one row per trip:
+
+==================  ======  =============================================
+column              unit    meaning
+==================  ======  =============================================
+``distance_km``     km      trip distance, (0, 2000]
+``avg_speed_kmh``   km/h    time-mean speed, (0, 250]
+``mode``            --      ``"eco"``, ``"normal"`` or ``"aggressive"``
+``temperature_c``   degC    ambient temperature, [-50, 60]
+``soc_initial``     --      state of charge at departure, [0, 1]
+``hour``            h       optional: departure hour of day, [0, 24)
+``grade_pct``       %       optional: mean road grade, [-30, 30]
+``trip_id``         --      optional: identifier
+==================  ======  =============================================
+
+Column convention for every table in hybridev: measured quantities are
+unsuffixed (``energy_kwh``, ``soc_final``); model outputs carry their source
+(``*_physics``, ``*_pred``, ``*_lo``, ``*_hi``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.forces import (
+    _battery_energy_kwh,
+    _interval_grade,
+    _wheel_power_w,
+    soc_trajectory,
+    trace_power_kw,
+)
+from hybridev.physics.kinematics import _check_steps, profile_table, synthesize_speed_trace
+from hybridev.physics.params import PROFILES, VehicleParams
+from hybridev.physics.validation import validate_trips
+
+__all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces",
+           "with_physics_columns"]
+
+BLOCK_TRIPS = 128
+"""Most trips simulated per block (bounds memory and keeps the working arrays
+in the CPU cache; results do not depend on it)."""
+
+_BLOCK_SAMPLES = 1 << 17
+"""Most speed samples per block; long traces get fewer trips per block."""
+
+_MAX_TRIPS = 10_000_000
+
+PAPER_SPEEDS_KMH = (40.0, 60.0, 80.0, 100.0, 120.0)
+PAPER_TEMPERATURES_C = (20.0, -5.0, 32.0)
+
+
+def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> pd.DataFrame:
+    """The paper's experimental design (Section V-A).
+
+    Distance uniform over 20-200 km; mean speed drawn from {40, 60, 80, 100,
+    120} km/h; initial SoC uniform over 0.3-1.0; modes split equally (then
+    shuffled); temperature drawn from {20, -5, 32} degC; departure hour uniform
+    over the integers 0-23.
+
+    Parameters
+    ----------
+    n_trips : int
+        Number of trips (>= 1).
+    seed : int or numpy.random.Generator
+
+    Returns
+    -------
+    pandas.DataFrame
+        Trip table with ``trip_id``, ``distance_km``, ``avg_speed_kmh``,
+        ``mode``, ``temperature_c``, ``soc_initial`` and ``hour``.
+
+    Examples
+    --------
+    >>> t = make_trips(6, seed=0)
+    >>> sorted(t["mode"].value_counts().to_dict().items())
+    [('aggressive', 2), ('eco', 2), ('normal', 2)]
+    """
+    try:
+        ok = not isinstance(n_trips, bool) and float(n_trips) == int(n_trips)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or not 1 <= int(n_trips) <= _MAX_TRIPS:
+        raise ValueError(f"n_trips={n_trips!r} is outside the allowed range: an integer in "
+                         f"[1, {_MAX_TRIPS}]")
+    n = int(n_trips)
+    rng = np.random.default_rng(seed)
+    modes = np.array(list(PROFILES))
+    return pd.DataFrame({
+        "trip_id": np.arange(n),
+        "distance_km": rng.uniform(20.0, 200.0, n),
+        "avg_speed_kmh": rng.choice(PAPER_SPEEDS_KMH, n),
+        "mode": rng.permutation(np.resize(modes, n)),
+        "temperature_c": rng.choice(PAPER_TEMPERATURES_C, n),
+        "soc_initial": rng.uniform(0.3, 1.0, n),
+        "hour": rng.integers(0, 24, n).astype(float),
+    })
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise ValueError(f"seed={seed!r} must be an integer")
+    return int(seed)
+
+
+def _blocks(trips: pd.DataFrame, n_steps: int, seed: int
+            ) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray | float]]:
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
+    d = trips["distance_km"].to_numpy(float)
+    s = trips["avg_speed_kmh"].to_numpy(float)
+    modes = trips["mode"].to_numpy(object)
+    grade = (np.arctan(trips["grade_pct"].to_numpy(float) / 100.0)
+             if "grade_pct" in trips.columns else None)
+    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns
+            else np.arange(len(trips)))
+    step = max(1, min(BLOCK_TRIPS, _BLOCK_SAMPLES // (int(n_steps) + 1)))
+    for start in range(0, len(trips), step):
+        sl = slice(start, start + step)
+        v, dt = synthesize_speed_trace(d[sl], s[sl], modes[sl], n_steps=n_steps, seed=seed,
+                                       trip_keys=keys[sl])
+        yield sl, v, dt, (0.0 if grade is None else grade[sl, None])
+
+
+def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_steps: int = 1000,
+             seed: int = 0, progress: Callable[[int], None] | None = None) -> pd.DataFrame:
+    """Run the physics model on every trip of a trip table.
+
+    Each trip gets a kinematically consistent speed trace of ``n_steps``
+    intervals (:func:`hybridev.synthesize_speed_trace`), on which the
+    force-balance model (:func:`hybridev.trace_energy_kwh`) gives the battery
+    energy.
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame
+        Trip table (see module docstring).
+    vehicle : VehicleParams, optional
+        Defaults to the paper's vehicle.
+    n_steps : int
+        Intervals per trip (the paper's ``N``).
+    seed : int
+        Seed of the speed-trace randomness; same seed, same output. A trip's
+        trace depends on ``(seed, trip_id)`` (row position when there is no
+        ``trip_id`` column), not on the other rows.
+    progress : callable, optional
+        Called with the number of trips finished after each block.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy of ``trips`` with ``energy_kwh_physics`` (kWh),
+        ``soc_final_physics`` (``s0 - E/C`` clipped to [0, 1]: an
+        empty battery delivers nothing, a full one stores nothing), ``max_speed_kmh`` (km/h)
+        and ``kwh_per_km_physics`` (kWh/km) added.
+
+    Examples
+    --------
+    >>> out = simulate(make_trips(3, seed=0), seed=0)
+    >>> bool(((out.soc_final_physics >= 0) & (out.soc_final_physics <= 1)).all())
+    True
+    """
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
+    t = validate_trips(trips)
+    veh = vehicle or VehicleParams()
+    n = len(t)
+    energy = np.empty(n)
+    vmax = np.empty(n)
+    prof = profile_table(t["mode"].to_numpy(object), n,
+                         ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
+    mult_eta = (prof["efficiency_multiplier"] / veh.drivetrain_efficiency)[:, None]
+    eta_r = prof["regen_efficiency"][:, None]
+    aux = (veh.aux_base_kw + hvac_power_kw(t["temperature_c"].to_numpy(float), veh)
+           + prof["aux_kw"])[:, None]
+    for sl, v, dt, grade in _blocks(t, n_steps, seed):
+        # Same model as trace_energy_kwh, minus the re-validation of our own traces.
+        pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
+        energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
+        vmax[sl] = v.max(axis=1) * 3.6
+        if progress is not None:
+            progress(min(sl.stop, n))
+    return with_physics_columns(t, energy, vmax, veh.battery_capacity_kwh)
+
+
+def with_physics_columns(trips: pd.DataFrame, energy_kwh, max_speed_kmh,
+                         capacity_kwh: float) -> pd.DataFrame:
+    """A copy of ``trips`` with :func:`simulate`'s four physics columns.
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame
+        Trip table with ``soc_initial`` and ``distance_km``.
+    energy_kwh : array_like, shape (n_trips,), kWh
+    max_speed_kmh : array_like, shape (n_trips,), km/h
+    capacity_kwh : float, kWh
+
+    Returns
+    -------
+    pandas.DataFrame
+        With ``energy_kwh_physics``, ``soc_final_physics`` (``s0 - E/C``
+        clipped to [0, 1]), ``max_speed_kmh`` and ``kwh_per_km_physics``.
+    """
+    energy = np.asarray(energy_kwh, dtype=float)
+    out = trips.copy()
+    out["energy_kwh_physics"] = energy
+    out["soc_final_physics"] = np.clip(
+        out["soc_initial"].to_numpy(float) - energy / capacity_kwh, 0.0, 1.0)
+    out["max_speed_kmh"] = max_speed_kmh
+    out["kwh_per_km_physics"] = energy / out["distance_km"].to_numpy(float)
+    return out
+
+
+@dataclass(frozen=True)
+class TripTraces:
+    """Per-step traces of simulated trips, for plotting.
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray, shape (n_trips, n_steps + 1), s
+    speed_mps : numpy.ndarray, shape (n_trips, n_steps + 1), m/s
+    power_kw : numpy.ndarray, shape (n_trips, n_steps), kW
+        Battery power over each interval (positive = discharge).
+    soc : numpy.ndarray, shape (n_trips, n_steps + 1)
+        State of charge at each sample, in [0, 1].
+    """
+
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    power_kw: np.ndarray
+    soc: np.ndarray
+
+
+def trip_traces(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
+                n_steps: int = 1000, seed: int = 0) -> TripTraces:
+    """Speed, power and SoC traces of the trips, exactly as :func:`simulate` uses them.
+
+    Memory grows as ``n_trips * n_steps``; meant for a handful of trips.
+
+    Examples
+    --------
+    >>> tr = trip_traces(make_trips(2, seed=0), n_steps=100)
+    >>> tr.speed_mps.shape, tr.power_kw.shape
+    ((2, 101), (2, 100))
+    """
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
+    t = validate_trips(trips)
+    veh = vehicle or VehicleParams()
+    modes = t["mode"].to_numpy(object)
+    temp = t["temperature_c"].to_numpy(float)
+    s0 = t["soc_initial"].to_numpy(float)
+    parts = []
+    for sl, v, dt, grade in _blocks(t, n_steps, seed):
+        p = trace_power_kw(v, dt, vehicle=veh, profile=modes[sl], temperature_c=temp[sl],
+                           grade_rad=grade)
+        soc = soc_trajectory(v, dt, s0[sl], vehicle=veh, profile=modes[sl],
+                             temperature_c=temp[sl], grade_rad=grade)
+        time = np.arange(n_steps + 1)[None, :] * dt[:, None]
+        parts.append((time, v, p, soc))
+    return TripTraces(*(np.concatenate(x, axis=0) for x in zip(*parts, strict=True)))

@@ -1,0 +1,181 @@
+"""Validation of trip tables at the public boundary.
+
+Every check names the field, the offending value and the allowed range.
+``check_table(..., on_error="raise")`` raises :class:`ValueError` on the first
+failing field; ``on_error="collect"`` returns the good rows and a table of
+rejected rows with one reason each (used for measured-trip files, whose bad
+rows are reported and counted, never silently dropped).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.physics.params import PROFILES
+
+__all__ = [
+    "OPTIONAL_TRIP_COLUMNS",
+    "REQUIRED_TRIP_COLUMNS",
+    "FieldRule",
+    "check_table",
+    "validate_trips",
+]
+
+REQUIRED_TRIP_COLUMNS = ("distance_km", "avg_speed_kmh", "mode", "temperature_c", "soc_initial")
+"""Columns every trip table must have."""
+
+OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id")
+"""Columns a trip table may have."""
+
+
+@dataclass(frozen=True)
+class FieldRule:
+    """Allowed range of one numeric column: ``lo < x`` or ``lo <= x``, same for ``hi``."""
+
+    lo: float
+    hi: float
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def describe(self) -> str:
+        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+
+    def bad_mask(self, x: np.ndarray) -> np.ndarray:
+        lo_ok = x > self.lo if self.lo_open else x >= self.lo
+        hi_ok = x < self.hi if self.hi_open else x <= self.hi
+        return ~(np.isfinite(x) & lo_ok & hi_ok)
+
+
+TRIP_RULES: dict[str, FieldRule] = {
+    "distance_km": FieldRule(0.0, 2000.0, lo_open=True),
+    "avg_speed_kmh": FieldRule(0.0, 250.0, lo_open=True),
+    "temperature_c": FieldRule(-50.0, 60.0),
+    "soc_initial": FieldRule(0.0, 1.0),
+    "hour": FieldRule(0.0, 24.0, hi_open=True),
+    "grade_pct": FieldRule(-30.0, 30.0),
+}
+
+
+def _numeric(col: pd.Series) -> np.ndarray:
+    return pd.to_numeric(col, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+
+
+def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[str, FieldRule],
+                modes: tuple[str, ...] | None = None, mode_required: bool = True,
+                on_error: str = "raise", what: str = "trips"
+                ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Check a table's columns and rows.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+    required : tuple of str
+        Columns that must be present.
+    rules : dict of str to FieldRule
+        Range rules for numeric columns (applied when the column exists).
+    modes : tuple of str, optional
+        Allowed values of a ``mode`` column (default: the keys of ``PROFILES``).
+    mode_required : bool
+        If False, a missing or empty ``mode`` is allowed.
+    on_error : {"raise", "collect"}
+    what : str
+        Name of the table used in messages.
+
+    Returns
+    -------
+    good : pandas.DataFrame
+        The rows that passed, numeric columns as float.
+    rejected : pandas.DataFrame
+        Columns ``row`` (original index), ``field``, ``value``, ``reason``.
+        Empty in ``"raise"`` mode.
+    """
+    if on_error not in ("raise", "collect"):
+        raise ValueError(f"on_error={on_error!r}; allowed: 'raise', 'collect'")
+    if not isinstance(table, pd.DataFrame):
+        raise ValueError(f"{what} must be a pandas DataFrame; got {type(table).__name__}")
+    missing = [c for c in required if c not in table.columns]
+    if missing:
+        raise ValueError(f"{what} is missing required column(s) {missing}; "
+                         f"required: {list(required)}")
+    if len(table) == 0:
+        raise ValueError(f"{what} is empty: at least one row is required")
+    modes = tuple(PROFILES) if modes is None else modes
+    out = table.copy()
+    bad_any = np.zeros(len(out), dtype=bool)
+    reasons: list[pd.DataFrame] = []
+
+    def report(field: str, mask: np.ndarray, values, allowed: str) -> None:
+        nonlocal bad_any
+        new = mask & ~bad_any
+        if not new.any():
+            return
+        if on_error == "raise":
+            i = int(np.flatnonzero(mask)[0])
+            raise ValueError(
+                f"{what}: {int(mask.sum())} row(s) have an invalid {field!r}; first at row "
+                f"{out.index[i]!r}: {field}={np.asarray(values, dtype=object)[i]!r}, "
+                f"allowed {allowed}")
+        vals = np.asarray(values, dtype=object)[new]
+        reasons.append(pd.DataFrame({
+            "row": out.index[new], "field": field, "value": vals,
+            "reason": [f"{field}={v!r} outside allowed {allowed}" for v in vals.tolist()]}))
+        bad_any |= mask
+
+    for field, rule in rules.items():
+        if field not in out.columns:
+            continue
+        raw = out[field]
+        x = _numeric(raw)
+        report(field, rule.bad_mask(x), raw.to_numpy(dtype=object), rule.describe())
+        out[field] = x
+    if "mode" in out.columns:
+        m = out["mode"]
+        present = m.notna() & (m.astype(str).str.len() > 0)
+        ok = m.isin(modes).to_numpy() | (~present.to_numpy() & (not mode_required))
+        report("mode", ~ok, m.to_numpy(dtype=object), f"one of {list(modes)}")
+    good = out.loc[~bad_any]
+    rejected = (pd.concat(reasons, ignore_index=True) if reasons
+                else pd.DataFrame(columns=["row", "field", "value", "reason"]))
+    if on_error == "collect" and len(good) == 0:
+        raise ValueError(f"{what}: all {len(out)} rows were rejected; first reason: "
+                         f"{rejected['reason'].iloc[0]}")
+    return good, rejected
+
+
+def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
+    """Validate a trip table and return a clean copy.
+
+    Required columns: ``distance_km`` (0, 2000], ``avg_speed_kmh`` (0, 250],
+    ``mode`` (a key of :data:`hybridev.PROFILES`), ``temperature_c``
+    [-50, 60] and ``soc_initial`` [0, 1]. Optional: ``hour`` [0, 24),
+    ``grade_pct`` [-30, 30], ``trip_id``.
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy with numeric columns as float.
+
+    Raises
+    ------
+    ValueError
+        Naming the field, the first bad value and the allowed range.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> t = pd.DataFrame({"distance_km": [-1.0], "avg_speed_kmh": [60.0], "mode": ["eco"],
+    ...                   "temperature_c": [20.0], "soc_initial": [0.8]})
+    >>> validate_trips(t)
+    Traceback (most recent call last):
+    ...
+    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]
+    """
+    good, _ = check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
+    return good

@@ -1,0 +1,302 @@
+"""Tests of range prediction with bands and the SoC fan chart (hybridev.apps.range)."""
+
+import warnings
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev import HybridModel, PhysicsFallbackWarning, make_trips, simulate
+from hybridev.apps.range import (
+    _anchor_physics,
+    _check_conditions,
+    _interp_log,
+    predict_range,
+    quantile_column,
+)
+from hybridev.apps.range_plot import FAN_QUANTILES, plot_soc_fan, soc_fan
+from hybridev.cli.main import main
+from hybridev.physics.truth import make_dataset
+
+N_STEPS = 200  # coarser traces than the default 1000 keep the fit fast; truth uses the same
+BANDS = ["range_km_q10", "range_km_q50", "range_km_q90"]
+AGREE_MEDIAN, AGREE_MAX = 0.005, 0.05
+"""Tolerance of predict_range against predict_distribution at the predicted range: the
+physics between anchor distances is interpolated, not simulated (module docstring)."""
+
+
+@pytest.fixture(scope="module")
+def model():
+    data = make_dataset(350, truth="structured", seed=0, n_steps=N_STEPS)
+    return HybridModel(n_steps=N_STEPS, max_epochs=50, n_members=3,
+                       n_posterior_draws=50).fit(data, seed=0)
+
+
+@pytest.fixture(scope="module")
+def conditions():
+    c = make_trips(40, seed=7).drop(columns=["distance_km", "soc_initial"])
+    return c, np.linspace(0.35, 1.0, 40)
+
+
+@pytest.fixture(scope="module")
+def saved(model, tmp_path_factory):
+    path = tmp_path_factory.mktemp("range") / "model"
+    model.save(path)
+    return str(path)
+
+
+def grid(**fixed):
+    """Conditions varying one factor (the keyword given as a list), others fixed."""
+    base = {"avg_speed_kmh": 90.0, "mode": "normal", "temperature_c": 20.0, "hour": 12.0}
+    (key, values), = ((k, v) for k, v in fixed.items() if isinstance(v, list))
+    rest = {k: v for k, v in fixed.items() if k != key}
+    return pd.DataFrame([{**base, **rest, key: v, "trip_id": 7} for v in values])
+
+
+def test_columns_and_ordered_bands(model, conditions):
+    c, s0 = conditions
+    out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
+    assert list(out.columns) == [*c.columns, "soc_initial", "soc_reserve", "budget_kwh",
+                                 "range_km_physics", *BANDS]
+    np.testing.assert_allclose(out.budget_kwh, (s0 - 0.1) * 75.0)
+    r = out[BANDS].to_numpy()
+    assert np.isfinite(r).all() and (r > 0).all()
+    assert (np.diff(r, axis=1) > 0).all()  # q10 < q50 < q90 (a fitted model has spread)
+
+
+def test_other_quantiles_are_named_and_ordered(model, conditions):
+    c, s0 = conditions
+    q = (0.025, 0.25, 0.5, 0.75, 0.975)
+    out = predict_range(model, c.head(5), soc_initial=s0[:5], quantiles=q)
+    cols = [quantile_column("range_km", x) for x in q]
+    assert cols == ["range_km_q02p5", "range_km_q25", "range_km_q50", "range_km_q75",
+                    "range_km_q97p5"]
+    assert (np.diff(out[cols].to_numpy(), axis=1) > 0).all()
+
+
+@pytest.mark.parametrize(("col", "energy_q", "level"),
+                         [("range_km_q50", 0.5, 0.5), ("range_km_q10", 0.9, 0.8),
+                          ("range_km_q90", 0.1, 0.8)])
+def test_agrees_with_predict_distribution(model, conditions, col, energy_q, level):
+    # at r = range_km_q the model's (1 - q) energy quantile, with its conformal spread
+    # factor for the band's level, is the budget
+    c, s0 = conditions
+    out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
+    trips = c.assign(distance_km=out[col], soc_initial=s0)
+    e = model.predict_distribution(trips, level=level).quantile(energy_q)
+    rel = np.abs(e / out.budget_kwh.to_numpy() - 1.0)
+    assert np.median(rel) < AGREE_MEDIAN and rel.max() < AGREE_MAX
+
+
+def test_range_falls_as_reserve_rises(model):
+    c = grid(temperature_c=[20.0])
+    r = np.array([predict_range(model, c, soc_initial=0.9, soc_reserve=s)[BANDS].to_numpy()[0]
+                  for s in (0.0, 0.1, 0.2, 0.4)])
+    assert (np.diff(r, axis=0) < 0).all()
+
+
+@pytest.mark.parametrize("mode", ["eco", "normal", "aggressive"])
+def test_range_falls_with_speed_above_60(model, mode):
+    out = predict_range(model, grid(mode=mode, avg_speed_kmh=[60.0, 80.0, 100.0, 120.0]),
+                        soc_initial=0.9, soc_reserve=0.1)
+    assert (np.diff(out[BANDS].to_numpy(), axis=0) < 0).all()
+
+
+@pytest.mark.parametrize("speed", [60.0, 100.0])
+def test_range_falls_in_the_cold_and_with_aggressiveness(model, speed):
+    cold = predict_range(model, grid(avg_speed_kmh=speed, temperature_c=[-5.0, 20.0]),
+                         soc_initial=0.9, soc_reserve=0.1)[BANDS].to_numpy()
+    assert (cold[0] < cold[1]).all()
+    modes = predict_range(model, grid(avg_speed_kmh=speed, mode=["eco", "normal", "aggressive"]),
+                          soc_initial=0.9, soc_reserve=0.1)[BANDS].to_numpy()
+    assert (np.diff(modes, axis=0) < 0).all()
+
+
+def test_rows_are_independent_and_seeded(model, conditions):
+    c, s0 = conditions
+    c = c.assign(trip_id=np.arange(len(c)) + 500)
+    full = predict_range(model, c, soc_initial=s0, seed=3)
+    part = predict_range(model, c.iloc[5:9], soc_initial=s0[5:9], seed=3)
+    np.testing.assert_allclose(part[BANDS].to_numpy(), full[BANDS].to_numpy()[5:9], rtol=1e-6)
+    again = predict_range(model, c, soc_initial=s0, seed=3)
+    pd.testing.assert_frame_equal(full, again)
+
+
+def test_unknown_mode_and_missing_hour(model):
+    c = pd.DataFrame({"avg_speed_kmh": [50.0, 110.0], "mode": [None, ""],
+                      "temperature_c": [10.0, 25.0]})
+    c.index = [10, 3]
+    out = predict_range(model, c, soc_initial=[0.9, 0.6], soc_reserve=[0.1, 0.05])
+    assert out["mode"].isna().all() and out.index.tolist() == [10, 3]
+    r = out[BANDS].to_numpy()
+    assert np.isfinite(r).all() and (np.diff(r, axis=1) > 0).all()
+
+
+def test_interpolated_physics_matches_direct_simulation():
+    # The physics is simulated at anchors r0 x (0.7, 1, 1.4) and interpolated in log r;
+    # stated tolerance against direct simulation (n_steps=1000, the default): median
+    # relative error < 1 %, largest < 6 % (the trace synthesis jumps where the cycle
+    # count reaches n_steps / 8).
+    m = HybridModel()
+    c = _check_conditions(make_trips(30, seed=11).drop(columns=["distance_km", "soc_initial"]))
+    s0 = np.full(len(c), 0.9)
+    r0 = np.linspace(60.0, 450.0, len(c))
+    knots = r0[:, None] * np.array([0.7, 1.0, 1.4])
+    k_med, _, _, _ = _anchor_physics(m, c, s0, knots, 0)
+    r = r0[:, None] * np.array([0.75, 0.9, 1.1, 1.3])
+    k_int = _interp_log(knots, k_med, r)
+    direct = np.column_stack([
+        simulate(c.assign(distance_km=r[:, j], soc_initial=s0, trip_id=np.arange(len(c))))
+        ["kwh_per_km_physics"].to_numpy() for j in range(r.shape[1])])
+    rel = np.abs(k_int / direct - 1.0)
+    assert np.median(rel) < 0.01 and rel.max() < 0.06
+    np.testing.assert_allclose(_interp_log(knots, k_med, knots), k_med, rtol=1e-12)
+
+
+def test_unfitted_model_gives_the_physics_range_with_a_warning():
+    c = grid(temperature_c=[-5.0, 20.0])
+    with pytest.warns(PhysicsFallbackWarning, match="not fitted"):
+        out = predict_range(HybridModel(n_steps=N_STEPS), c, soc_initial=0.8, soc_reserve=0.1)
+    r = out[[*BANDS, "range_km_physics"]].to_numpy()
+    assert np.ptp(r, axis=1).max() == 0.0  # degenerate band: all equal the physics
+    e = simulate(c.assign(distance_km=r[:, 0], soc_initial=0.8, trip_id=7),
+                 n_steps=N_STEPS)["energy_kwh_physics"]
+    np.testing.assert_allclose(e, 0.7 * 75.0, rtol=0.05)  # the budget, up to interpolation
+
+
+def test_point_model_without_spread_is_rejected():
+    data = make_dataset(80, truth="structured", seed=1, n_steps=100)
+    m = HybridModel(n_members=1, heteroscedastic=False, calibrate_physics=False,
+                    conformal_fraction=0.0, max_epochs=2, n_steps=100).fit(data, seed=0)
+    with pytest.raises(ValueError, match="no predictive spread"):
+        predict_range(m, grid(temperature_c=[20.0]), soc_initial=0.8)
+
+
+C1 = pd.DataFrame({"avg_speed_kmh": [90.0], "mode": ["eco"], "temperature_c": [20.0]})
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"soc_initial": 0.0}, r"soc_initial=0\.0 is outside the allowed range \(0, 1\]"),
+    ({"soc_initial": 1.2}, r"soc_initial=1\.2 is outside the allowed range \(0, 1\]"),
+    ({"soc_initial": float("nan")}, r"soc_initial=nan"),
+    ({"soc_initial": [0.5, 0.6]}, r"soc_initial must be a number or one per condition row"),
+    ({"soc_initial": "high"}, r"soc_initial='high' must be a number"),
+    ({"soc_initial": 0.5, "soc_reserve": 0.5}, r"soc_reserve=0\.5 is outside .* \[0, 0\.5\)"),
+    ({"soc_initial": 0.5, "soc_reserve": -0.1}, r"soc_reserve=-0\.1 is outside"),
+    ({"soc_initial": 0.5, "quantiles": (0.9, 0.1)}, r"quantiles=.* strictly increasing"),
+    ({"soc_initial": 0.5, "quantiles": (0.0, 0.5)}, r"quantiles=.* allowed range \(0, 1\)"),
+    ({"soc_initial": 0.5, "quantiles": ()}, r"quantiles=.* non-empty"),
+    ({"soc_initial": 0.5, "quantiles": (0.999,)}, r"too extreme .* calibration trips"),
+])
+def test_bad_arguments_name_field_value_and_range(model, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        predict_range(model, C1, **kwargs)
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    (lambda c: c.assign(distance_km=100.0), r"'distance_km' column, which is not allowed"),
+    (lambda c: c.assign(soc_initial=0.5), r"'soc_initial' column, which is not allowed"),
+    (lambda c: c.drop(columns="avg_speed_kmh"), r"missing required column\(s\) \['avg_speed"),
+    (lambda c: c.assign(avg_speed_kmh=-5.0), r"'avg_speed_kmh'.*avg_speed_kmh=-5\.0.*\(0, 250\]"),
+    (lambda c: c.assign(temperature_c=80.0), r"temperature_c=80\.0, allowed \[-50, 60\]"),
+    (lambda c: c.assign(mode="sport"), r"mode='sport', allowed one of"),
+    (lambda c: c.assign(hour=24.0), r"hour=24\.0, allowed \[0, 24\)"),
+    (lambda c: c.iloc[:0], r"conditions is empty"),
+    (lambda c: c.to_dict("list"), r"conditions must be a pandas DataFrame"),
+])
+def test_bad_conditions_are_rejected(model, change, match):
+    with pytest.raises(ValueError, match=match):
+        predict_range(model, change(C1), soc_initial=0.8)
+
+
+def test_model_must_be_a_hybrid_model():
+    with pytest.raises(ValueError, match="model must be a HybridModel"):
+        predict_range(object(), C1, soc_initial=0.8)
+
+
+def test_soc_fan_is_ordered_starts_at_soc_and_meets_the_range(model):
+    row = {"avg_speed_kmh": 90.0, "mode": "normal", "temperature_c": -5.0, "hour": 8.0}
+    fan = soc_fan(model, row, soc_initial=0.8)
+    cols = [quantile_column("soc", p) for p in FAN_QUANTILES]
+    assert list(fan.columns) == ["distance_km", *cols]
+    assert fan.distance_km.iloc[0] == 0.0 and (fan.iloc[0][cols] == 0.8).all()
+    s = fan[cols].to_numpy()
+    assert (np.diff(s, axis=1) >= 0).all()  # q05 <= q25 <= q50 <= q75 <= q95
+    assert (np.diff(s[:, 2]) <= 1e-12).all() and s[-1, -1] == 0.0  # falls to empty
+    band = predict_range(model, pd.DataFrame([row]), soc_initial=0.8, soc_reserve=0.1)
+    at = soc_fan(model, row, soc_initial=0.8, distances_km=band[BANDS].to_numpy()[0])
+    # soc q50 is the reserve at range q50; q10 of the range <-> soc q90 (not in the fan)
+    assert abs(at["soc_q50"].iloc[1] - 0.1) < 0.01
+
+
+def test_soc_fan_rejects_bad_input(model):
+    row = {"avg_speed_kmh": 90.0, "mode": "eco", "temperature_c": 20.0}
+    with pytest.raises(ValueError, match=r"distances_km=.* finite distances >= 0"):
+        soc_fan(model, row, soc_initial=0.8, distances_km=[-1.0, 10.0])
+    with pytest.raises(ValueError, match="condition must be one row"):
+        soc_fan(model, pd.DataFrame([row, row]), soc_initial=0.8)
+    with pytest.raises(ValueError, match=r"soc_initial=1\.5"):
+        soc_fan(model, row, soc_initial=1.5)
+
+
+def test_plot_uses_no_global_pyplot_state(model):
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+
+    before = plt.get_fignums()
+    fan = soc_fan(model, {"avg_speed_kmh": 60.0, "mode": "eco", "temperature_c": 20.0},
+                  soc_initial=0.9, distances_km=np.linspace(0, 300, 11))
+    fig = plot_soc_fan(fan, soc_reserve=0.1, ranges={"range_km_q10": 250.0,
+                                                      "range_km_q90": np.inf}, title="t")
+    assert isinstance(fig, Figure) and plt.get_fignums() == before
+    ax = fig.axes[0]
+    assert len(ax.collections) == 2 and ax.get_xlabel().startswith("distance")
+    assert any("250" in t.get_text() for t in ax.get_legend().get_texts())
+    other = Figure()
+    assert plot_soc_fan(fan, ax=other.add_subplot()) is other
+    with pytest.raises(ValueError, match="fan must be a DataFrame from soc_fan"):
+        plot_soc_fan(fan.drop(columns="soc_q25"))
+    assert matplotlib.get_backend()  # nothing above switched backends
+
+
+def test_cli_prints_bands_and_saves_the_chart(saved, tmp_path, capsys):
+    png = tmp_path / "fan.png"
+    code = main(["range", "--soc", "0.8", "--speed", "90", "--mode", "normal", "--temp", "-5",
+                 "--model", saved, "--reserve", "0.1", "--hour", "8", "--plot", str(png)])
+    out = capsys.readouterr().out
+    assert code == 0
+    for q in ("q10", "q50", "q90"):
+        assert f"  {q} " in out
+    lines = {ln.split()[0]: float(ln.split()[1]) for ln in out.splitlines()
+             if ln.strip().startswith("q")}
+    assert lines["q10"] < lines["q50"] < lines["q90"]
+    assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_without_model_prints_the_physics_range(capsys):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the fallback is reported in the output instead
+        code = main(["range", "--soc", "0.8", "--speed", "90", "--temp", "20"])
+    out = capsys.readouterr().out
+    assert code == 0 and "physics model alone" in out and "need a fitted model" in out
+    assert "  q50 " not in out
+
+
+@pytest.mark.parametrize(("argv", "match"), [
+    (["--soc", "1.5"], "--soc=1.5 is outside the allowed range (0, 1]"),
+    (["--soc", "0.5", "--reserve", "0.5"], "--reserve=0.5 is outside the allowed range [0, 0.5)"),
+    (["--speed", "0"], "--speed=0.0 is outside the allowed range (0, 250]"),
+    (["--temp", "nan"], "--temp=nan is outside"),
+    (["--hour", "25"], "--hour=25.0 is outside the allowed range [0, 24)"),
+    (["--plot", "fan.txt"], "--plot='fan.txt' must end in one of"),
+    (["--model", "/nonexistent/model"], "nonexistent"),
+])
+def test_cli_bad_input_exits_2_naming_the_field(argv, match, capsys, tmp_path):
+    base = {"--soc": "0.8", "--speed": "90", "--temp": "20"}
+    args = dict(base)
+    args.update(dict(zip(argv[::2], argv[1::2], strict=True)))
+    flat = [x for kv in args.items() for x in kv]
+    assert main(["range", *flat]) == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "fan.txt").exists()

@@ -1,0 +1,248 @@
+"""Tests of the calibration report (hybridev.apps.report.build*, `hybridev calibrate`)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import re
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+import hybridev.apps.report.build as R
+from hybridev import make_trips, read_measured_trips
+from hybridev.apps.report import figures as F
+from hybridev.apps.report.html import FIGURES
+from hybridev.bayes.sampler import simulate_measured
+from hybridev.cli.main import main
+
+N_STEPS = 200  # trace resolution of data and models alike (fast)
+FAST = {"n_members": 2, "model_params": {"max_epochs": 15, "n_steps": N_STEPS},
+        "calibrate_kwargs": {"n_steps": 400, "trace_steps": N_STEPS}}
+BAD = {"b_nan": ("distance_km", np.nan), "b_neg": ("energy_kwh", -1.0),
+       "b_soc": ("soc_final", 0.99), "b_mode": ("mode", "turbo")}
+
+
+def _measured_table(n: int = 60) -> pd.DataFrame:
+    t = simulate_measured(make_trips(n, seed=0), noise_rel=0.04, seed=1, n_steps=N_STEPS)
+    t = t.drop(columns=["energy_kwh_true"])
+    t["trip_id"] = [f"t{i:03d}" for i in range(n)]
+    t["session_group"] = [f"g{i // 3}" for i in range(n)]
+    t["soc_final"] = (t["soc_initial"] - t["energy_kwh"] / 75.0).clip(lower=0.0)
+    bad = t.iloc[:len(BAD)].copy()
+    bad["trip_id"] = list(BAD)
+    bad["soc_final"] = 0.1
+    for i, (field, value) in enumerate(BAD.values()):
+        bad[field] = bad[field].astype(object)
+        bad.iloc[i, bad.columns.get_loc(field)] = value
+    return pd.concat([t, bad], ignore_index=True)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One fast report on a synthetic file with 4 malformed rows (and its HoldoutResult)."""
+    d = tmp_path_factory.mktemp("report")
+    _measured_table().to_csv(d / "measured.csv", index=False)
+    measured = read_measured_trips(d / "measured.csv")
+    captured = {}
+    orig = R.holdout_evaluation
+
+    def spy(*args, **kwargs):
+        captured["result"] = orig(*args, **kwargs)
+        return captured["result"]
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(R, "holdout_evaluation", spy)
+    try:
+        summary = R.calibration_report(measured, out_dir=d / "out", seed=0, **FAST)
+    finally:
+        mp.undo()
+    return {"dir": d, "out": d / "out", "summary": summary, "measured": measured,
+            "result": captured["result"]}
+
+
+def test_report_writes_every_file(run):
+    out = run["out"]
+    for name in ("report.html", "summary.json", "predictions.csv", "rejected.csv"):
+        assert (out / name).is_file(), name
+    assert sorted(p.stem for p in (out / "figures").glob("*.png")) == sorted(FIGURES)
+    assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(
+        run["summary"]))
+    s = run["summary"]
+    assert (s["data"]["n_rows_read"], s["data"]["n_valid"]) == (64, 60)
+    assert s["split"]["n_train"] + s["split"]["n_test"] == 60
+    assert set(s["metrics"]) == {"nominal", "calibrated", "hybrid"}
+
+
+def test_html_is_self_contained(run):
+    text = (run["out"] / "report.html").read_text(encoding="utf-8")
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:|//)""", text, re.I)
+    assert "<script" not in text.lower() and "<link" not in text.lower()
+    srcs = re.findall(r"""<img[^>]*src=['"]([^'"]+)['"]""", text)
+    assert len(srcs) == len(FIGURES)
+    for src in srcs:
+        assert src.startswith("data:image/png;base64,")
+        assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_every_rejected_row_is_listed_with_reason(run):
+    s = run["summary"]
+    rej = run["measured"].rejected
+    assert s["data"]["n_rejected"] == len(rej) == len(BAD) == len(s["rejected"])
+    assert {r["trip_id"]: r["field"] for r in s["rejected"]} == {k: v[0] for k, v in BAD.items()}
+    text = (run["out"] / "report.html").read_text(encoding="utf-8")
+    assert f"Rejected rows ({len(BAD)})" in text
+    section = text.split(f"Rejected rows ({len(BAD)})", 1)[1]
+    for r in s["rejected"]:
+        assert r["reason"] and r["reason"] in html.unescape(section)
+        assert f"<td>{r['trip_id']}</td>" in section
+    on_disk = pd.read_csv(run["out"] / "rejected.csv")
+    assert sorted(on_disk["trip_id"]) == sorted(BAD)
+    assert {"row", "field", "value", "reason"} <= set(on_disk.columns)
+
+
+def test_summary_matches_recomputation_from_predictions(run):
+    s, lv = run["summary"], run["summary"]["level"]
+    p = pd.read_csv(run["out"] / "predictions.csv")
+    y = p["energy_kwh"].to_numpy()
+    assert len(p) == s["split"]["n_test"]
+    cols = {"nominal": "energy_kwh_nominal", "calibrated": "energy_kwh_calibrated",
+            "hybrid": "energy_kwh_pred"}
+    for k, col in cols.items():
+        err = p[col].to_numpy() - y
+        m = s["metrics"][k]
+        assert m["mape_pct"] == pytest.approx(100 * np.mean(np.abs(err) / y), rel=1e-9)
+        assert m["mae_kwh"] == pytest.approx(np.mean(np.abs(err)), rel=1e-9)
+        assert m["rmse_kwh"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-9)
+    for k, (lo, hi) in {"calibrated": ("energy_kwh_calibrated_lo", "energy_kwh_calibrated_hi"),
+                        "hybrid": ("energy_kwh_lo", "energy_kwh_hi")}.items():
+        inside = (p[lo] <= y) & (y <= p[hi])
+        assert s["metrics"][k]["coverage"][f"{lv:g}"] == pytest.approx(inside.mean(), abs=1e-12)
+        assert s["metrics"][k]["mean_width_kwh"] == pytest.approx((p[hi] - p[lo]).mean(),
+                                                                  rel=1e-9)
+    rho = stats.spearmanr(p["confidence"], np.abs(p["energy_kwh_pred"] - y)).statistic
+    assert s["metrics"]["hybrid"]["spearman_confidence"] == pytest.approx(rho, abs=1e-12)
+    n_flag = int(np.ceil(0.1 * len(p)))
+    top = p.nlargest(n_flag, "confidence")["trip_id"]
+    assert [f["trip_id"] for f in s["flagged"]] == top.tolist()
+
+
+def test_held_out_trips_are_whole_sessions(run):
+    p = pd.read_csv(run["out"] / "predictions.csv")
+    trips = run["measured"].trips
+    test_groups = set(p["session_group"])
+    assert set(trips.loc[trips.session_group.isin(test_groups), "trip_id"]) == set(p["trip_id"])
+    assert run["summary"]["split"]["n_test_groups"] == len(test_groups)
+
+
+def test_failed_run_leaves_no_partial_directory(run, tmp_path, monkeypatch):
+    def boom(*args, **kwargs):
+        raise RuntimeError("figure failed")
+
+    monkeypatch.setattr(R, "holdout_evaluation", lambda *a, **k: run["result"])
+    monkeypatch.setattr(F, "corner_figure", boom)
+    out = tmp_path / "new_report"
+    with pytest.raises(RuntimeError, match="figure failed"):
+        R.calibration_report(run["measured"], out_dir=out, **FAST)
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []  # no temporary directory left behind
+    old = tmp_path / "old_report"
+    old.mkdir()
+    (old / "report.html").write_text("previous")
+    with pytest.raises(RuntimeError):
+        R.calibration_report(run["measured"], out_dir=old, **FAST)
+    assert [p.name for p in old.iterdir()] == ["report.html"]
+    assert (old / "report.html").read_text() == "previous"
+
+
+def test_split_trips_groups_seed_and_errors():
+    t = pd.DataFrame({"session_group": np.repeat(list("abcdefghij"), 3)})
+    m0 = R.split_trips(t, 0.3, seed=0)
+    assert np.array_equal(m0, R.split_trips(t, 0.3, seed=0))
+    assert any(not np.array_equal(m0, R.split_trips(t, 0.3, seed=s)) for s in range(1, 6))
+    for g, part in t.groupby("session_group"):
+        assert m0[part.index].all() or not m0[part.index].any(), g  # whole groups
+    assert m0.sum() == 9  # 3 of 10 groups
+    plain = R.split_trips(t.drop(columns="session_group"), 0.2, seed=0, group_column=None)
+    assert plain.sum() == 6
+    with pytest.raises(ValueError, match=r"test_fraction=1\.5"):
+        R.split_trips(t, 1.5)
+    with pytest.raises(ValueError, match="at least 2"):
+        R.split_trips(t.assign(session_group="x"), 0.2)
+
+
+def test_figures_do_not_touch_the_global_backend(run):
+    before = matplotlib.rcParams["backend"]
+    fig = F.reliability_figure({"x": (np.array([0.5, 0.9]), np.array([0.4, 0.95]))}, 10)
+    assert F.png_bytes(fig)[:4] == b"\x89PNG"
+    assert matplotlib.rcParams["backend"] == before
+
+
+def test_cli_exit_2_on_missing_file(tmp_path, capsys):
+    code = main(["calibrate", str(tmp_path / "nope.csv"), "--out", str(tmp_path / "r")])
+    assert code == 2
+    assert "nope.csv" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+def test_cli_exit_2_when_no_row_is_valid(tmp_path, capsys):
+    bad = _measured_table(6).iloc[6:]
+    bad.to_csv(tmp_path / "bad.csv", index=False)
+    code = main(["calibrate", str(tmp_path / "bad.csv"), "--out", str(tmp_path / "r")])
+    assert code == 2
+    assert "rejected" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--level", "1.5"], "--level=1.5"),
+    (["--test-fraction", "0"], "test_fraction=0.0"),
+])
+def test_cli_exit_2_on_bad_options(run, tmp_path, capsys, args, needle):
+    code = main(["calibrate", str(run["dir"] / "measured.csv"), "--out", str(tmp_path / "r"),
+                 *args])
+    assert code == 2
+    assert needle in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.slow
+def test_cli_end_to_end_and_reproducible(run, tmp_path, capsys):
+    argv = ["calibrate", str(run["dir"] / "measured.csv"), "--members", "2", "--max-epochs",
+            "10", "--quiet", "--seed", "3"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
+    assert "rejected 4 row(s)" in capsys.readouterr().err
+    a, b = (json.loads((tmp_path / x / "summary.json").read_text()) for x in "ab")
+    assert a["metrics"] == b["metrics"] and a["parameters"] == b["parameters"]
+    assert (tmp_path / "a" / "report.html").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_cli_with_logged_timeseries(tmp_path, capsys):
+    from hybridev.physics.kinematics import synthesize_speed_trace
+
+    t = _measured_table(45).iloc[:45]
+    v, dt = synthesize_speed_trace(t.distance_km, t.avg_speed_kmh, list(t["mode"]),
+                                   n_steps=N_STEPS, seed=7, trip_keys=t.trip_id)
+    k = v.shape[1]
+    ts = pd.DataFrame({"trip_id": np.repeat(t.trip_id.to_numpy(), k),
+                       "t_s": (np.arange(k)[None, :] * dt[:, None]).ravel(),
+                       "speed_kmh": 3.6 * v.ravel()})
+    ts = pd.concat([ts, pd.DataFrame({"trip_id": ["t000"], "t_s": [0.0],
+                                      "speed_kmh": [10.0]})])  # t000: time not increasing
+    t.to_csv(tmp_path / "m.csv", index=False)
+    ts.to_parquet(tmp_path / "ts.parquet", index=False)
+    code = main(["calibrate", str(tmp_path / "m.csv"), "--timeseries",
+                 str(tmp_path / "ts.parquet"), "--members", "2", "--max-epochs", "10",
+                 "--quiet", "--out", str(tmp_path / "r")])
+    assert code == 0
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert s["data"]["logged_traces"] is True
+    assert "synthesised traces" in s["labels"]["hybrid"]
+    assert s["data"]["n_rejected_timeseries"] == 1 and s["data"]["n_valid"] == 44
+    assert {r["trip_id"] for r in s["rejected"]} == {"t000"}

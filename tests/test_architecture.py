@@ -1,0 +1,152 @@
+"""The package's architecture: layers, import direction, no circles, public names.
+
+Layers, bottom to top (a module may import its own layer and the layers below):
+
+``core`` < ``physics``, ``metrics`` < ``data`` < ``bayes`` < ``learning`` < ``apps`` < ``cli``
+< ``fleet``.
+"""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import hybridev
+
+PKG = Path(hybridev.__file__).resolve().parent
+RANK = {"core": 0, "physics": 1, "metrics": 1, "data": 2, "bayes": 3, "learning": 4,
+        "apps": 5, "cli": 6, "fleet": 7}
+
+
+def _modules():
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        yield ".".join(parts), path
+
+
+def _imports(name: str, path: Path) -> set[str]:
+    """Absolute hybridev modules imported anywhere in the file (top level or in functions)."""
+    tree = ast.parse(path.read_text())
+    pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names if a.name.startswith("hybridev"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")
+                base = base[: len(base) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            if mod.startswith("hybridev"):
+                out.add(mod)
+                out.update(f"{mod}.{a.name}" for a in node.names)
+    return out
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in RANK else None
+
+
+GRAPH = {name: _imports(name, path) for name, path in _modules()}
+
+
+def test_every_module_is_in_a_layer():
+    loose = [m for m in GRAPH if m.count(".") >= 1 and _layer(m) is None]
+    assert loose == [], f"modules outside the layer subpackages: {loose}"
+
+
+def test_imports_point_down_the_layers():
+    bad = []
+    for mod, deps in GRAPH.items():
+        lay = _layer(mod)
+        if lay is None:
+            continue
+        for dep in deps:
+            dl = _layer(dep)
+            if dl is not None and RANK[dl] > RANK[lay]:
+                bad.append(f"{mod} -> {dep}")
+            if dl is not None and lay != dl and RANK[dl] == RANK[lay]:
+                bad.append(f"{mod} -> {dep} (sibling layer)")
+    assert bad == [], "imports pointing up the layers:\n" + "\n".join(sorted(bad))
+
+
+def test_no_import_cycles():
+    nodes = set(GRAPH)
+    edges = {m: {d for d in deps if d in nodes and d != m} for m, deps in GRAPH.items()}
+    state, stack, cycles = {}, [], []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for d in sorted(edges[m]):
+            if d.startswith(m + "."):  # a package importing its own submodule is fine
+                continue
+            if state.get(d) == 1:
+                cycles.append([*stack[stack.index(d):], d])
+            elif d not in state:
+                visit(d)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(nodes):
+        if m not in state:
+            visit(m)
+    assert cycles == [], f"import cycles: {cycles}"
+
+
+@pytest.mark.parametrize("layer", ["core", "physics", "data", "bayes", "metrics"])
+def test_lower_layers_never_import_torch(layer):
+    """Physics (and everything below learning) runs without torch: checked in a fresh process."""
+    mods = sorted(m for m in GRAPH if _layer(m) == layer)
+    # ``import hybridev`` itself loads the physics layer (its names are top-level), so
+    # what counts is what the layer's modules load beyond that.
+    code = ("import sys, importlib, hybridev\n"
+            "base = set(sys.modules)\n"
+            f"for m in {mods!r}: importlib.import_module(m)\n"
+            "bad = sorted(k for k in sys.modules if k == 'torch' or k.startswith('torch.'))\n"
+            "above = sorted(k for k in set(sys.modules) - base if k.startswith('hybridev.') and "
+            f"k.split('.')[1] in {[k for k, r in RANK.items() if r > RANK[layer]]!r})\n"
+            "print(len(bad), above)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    n_torch, above = res.stdout.split(" ", 1)
+    assert n_torch == "0", f"{layer} imports torch"
+    assert above.strip() == "[]", f"{layer} loads modules above it: {above}"
+
+
+PUBLIC = sorted("""
+FEATURE_NAMES PAPER_CONFIG PROFILES ChargingPlan ConstantRate ConvergenceWarning DrivingProfile
+EnergyDistribution HybridModel LinearBaseline LoggedTraces MeasuredTrips NormalizedConformal
+PhysicsFallbackWarning PhysicsOnly PhysicsPosterior PhysicsPrior PhysicsStats PureML TripTraces
+VehicleParams __version__ aux_power_kw calibrate_physics calibration_report coverage
+coverage_table crps_gaussian crps_mixture effect_breakdown energy_from_stats evaluate_charging
+get_profile hvac_power_kw mae make_dataset make_trips mape miscalibration_area mixture_interval
+mixture_quantile noise_floor_pct oracle_energy_kwh plan_charging
+plan_charging_from_distribution plot_soc_fan positive_kinetic_energy predict_range
+read_measured_trips reliability_curve rmse run_demo simulate simulate_measured soc_fan
+soc_trajectory synthesize_speed_trace trace_energy_kwh trace_power_kw trip_stats trip_traces
+validate_measured_trips validate_trips wheel_power_kw winkler_score
+""".split())
+
+
+def test_public_names_are_pinned():
+    """``import hybridev`` names are part of the contract: adding is fine, removing is not."""
+    missing = [n for n in PUBLIC if n not in hybridev.__all__]
+    assert missing == []
+    for n in hybridev.__all__:
+        assert getattr(hybridev, n) is not None
+
+
+def test_import_hybridev_is_light():
+    res = subprocess.run([sys.executable, "-c", "import sys, hybridev; "
+                          "print(sorted({k.split('.')[0] for k in sys.modules} & "
+                          "{'torch', 'sklearn', 'emcee', 'matplotlib'}))"],
+                         capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == "[]"
