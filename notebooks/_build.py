@@ -55,8 +55,8 @@ QUICKSTART = [
 
     This notebook walks through the public API in that order. **All numbers below come from a
     reduced run** (600 trips, 200-step speed traces, 40 training epochs) so that it executes in
-    seconds; the full-size results are in `evaluation/REPRODUCTION.md` (point accuracy) and
-    `evaluation/UNCERTAINTY.md` (intervals).
+    seconds; the full-size results are in `evaluation/paper_experiments/REPRODUCTION.md` (point accuracy) and
+    `evaluation/uncertainty/UNCERTAINTY.md` (intervals).
     """),
     code("""
     %matplotlib inline
@@ -244,7 +244,7 @@ QUICKSTART = [
     """),
     md("""
     So a coverage a few points off 0.9 is within the sampling noise of one small test set;
-    `evaluation/UNCERTAINTY.md` measures coverage over many trips and seeds.
+    `evaluation/uncertainty/UNCERTAINTY.md` measures coverage over many trips and seeds.
     """),
     code("""
     fig, ax = plt.subplots(figsize=(5.5, 5), layout="constrained")
@@ -304,9 +304,9 @@ PAPER = [
 
     **Reduced run**: 800 trips, 200-step traces, 60 epochs, one seed. The full-size tables
     (1,500 trips, 5 seeds, learning curves, ablations, timing) are produced by
-    `python -m evaluation.reproduce` into `evaluation/REPRODUCTION.md` and
-    `evaluation/tables/`; the physics-only tables and every deviation from the paper are in
-    `evaluation/physics_reproduction.md`.
+    `python -m evaluation.paper_experiments.reproduce` into `evaluation/paper_experiments/REPRODUCTION.md` and
+    `evaluation/paper_experiments/tables/`; the physics-only tables and every deviation from the paper are in
+    `evaluation/physics_reproduction/physics_reproduction.md`.
     """),
     code("""
     %matplotlib inline
@@ -357,7 +357,7 @@ PAPER = [
     """),
     md("""
     The `diff_pct` column is our physics against the paper's table. The profiles are not
-    re-tuned to close the gaps: `evaluation/physics_reproduction.md` traces them to the
+    re-tuned to close the gaps: `evaluation/physics_reproduction/physics_reproduction.md` traces them to the
     paper's own equations (its trace construction and profile parameters) and lists every
     deviation.
 
@@ -394,7 +394,7 @@ PAPER = [
     md("""
     ## 3. Physics vs paper network vs default hybrid on held-out trips
 
-    Split as in `evaluation/reproduce.py`: 15 % of the trips held out (permutation from
+    Split as in `evaluation/paper_experiments/reproduce.py`: 15 % of the trips held out (permutation from
     `default_rng([seed, 7])`). Three predictors:
 
     * **physics**: the nominal force-balance model (the paper's physics-only baseline);
@@ -449,7 +449,7 @@ PAPER = [
 
     With one seed and 120 test trips, differences of a few tenths of a percent are noise. The
     full-size reduction (5 seeds x 225 test trips, up to 200 epochs) is in the summary table
-    of `evaluation/REPRODUCTION.md`.
+    of `evaluation/paper_experiments/REPRODUCTION.md`.
     """),
     code("""
     reduction = 100 * (1 - results.loc[["paper network", "default hybrid"]]
@@ -473,7 +473,7 @@ PAPER = [
     md("""
     The paper truth's error distribution is the noise itself, whatever the model; on the
     structured truth the hybrid's errors shrink to the 3.5 % noise. Full-size versions of this
-    figure: `evaluation/figures/repro_error_distribution_paper.png` and
+    figure: `evaluation/paper_experiments/figures/repro_error_distribution_paper.png` and
     `..._structured.png`.
     """),
 ]
@@ -499,7 +499,7 @@ CALIBRATION = [
     5. Optional: real logged trips, if `../shared/realtrips` is present.
 
     **Reduced run** (300 trips, 200-step traces, a 2-member ensemble trained for 20 epochs).
-    Parameter recovery over many seeds is in `evaluation/UNCERTAINTY.md`; the full calibration
+    Parameter recovery over many seeds is in `evaluation/uncertainty/UNCERTAINTY.md`; the full calibration
     report on the real trips is `calibration/results/realtrips_report.md`.
     """),
     code("""
@@ -580,7 +580,7 @@ CALIBRATION = [
     md("""
     A 90 % credible interval misses its true value one time in ten on average, so a miss in
     one data set is no alarm; whether the intervals miss at the right rate is a question for
-    many seeds (`evaluation/UNCERTAINTY.md`). Single parameters are loosely pinned because
+    many seeds (`evaluation/uncertainty/UNCERTAINTY.md`). Single parameters are loosely pinned because
     trip energies only see combinations of them: the posterior correlations show which ones
     trade off (e.g. a per-distance loss against a per-time one, as rolling resistance against
     auxiliary power), and misses tend to come in such pairs.
@@ -759,7 +759,7 @@ RANGE = [
        energies.
 
     **Reduced run** (600 trips, 200-step traces, 40 epochs). Full-size figures and the
-    coverage of the range bands: `evaluation/range_bands.md`; the full demo (`hybridev demo`)
+    coverage of the range bands: `evaluation/range_bands/range_bands.md`; the full demo (`hybridev demo`)
     writes the same figures for a 1,500-trip model.
     """),
     code("""
@@ -799,7 +799,7 @@ RANGE = [
     md("""
     Mind the caveat in `hybridev.apps.range`: a full battery's range (hundreds of km) is beyond the
     20-200 km training trips, so the network extrapolates in distance and the bands cover the
-    true range less often there. `evaluation/range_bands.md` measures their coverage within
+    true range less often there. `evaluation/range_bands/range_bands.md` measures their coverage within
     and beyond the training distances, and for a model trained on longer trips.
 
     ## 2. SoC fan chart

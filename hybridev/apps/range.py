@@ -16,7 +16,7 @@ vectorised over (conditions x grid):
    per trace, long trips get fewer, longer cycles (:mod:`hybridev.physics.kinematics`),
    and the consumption ``E_p(r) / r`` at the range distance differs from the
    100 km trip's by 2 % at the median, 13 % at the 95th percentile and 28 %
-   at worst (1,500 conditions, ``evaluation/range_bands.md``; the anchors
+   at worst (1,500 conditions, ``evaluation/range_bands/range_bands.md``; the anchors
    below: 0.0 %, 0.7 %, 3.5 %). Instead a first run at ``B / 0.18 kWh/km``
    (physics at the posterior median plus the networks' median) gives the
    consumption ``k``
@@ -29,7 +29,7 @@ vectorised over (conditions x grid):
    ``n_steps / 8``), so the interpolated physics differs from direct
    simulation: the energy quantile of ``predict_distribution`` at the
    predicted range is within about 0.1 % of ``B`` at the median, 1 % at the
-   95th percentile and 5 % at worst (``evaluation/range_bands.md``;
+   95th percentile and 5 % at worst (``evaluation/range_bands/range_bands.md``;
    ``tests/test_range.py`` checks physics interpolation median < 1 %, max < 6 %).
 2. **The residual networks on every (condition, distance) pair**, with the
    features a trip of that length would have: distance ``r``, speed, the
@@ -61,7 +61,7 @@ The bands are only as good as the model at the range distance: the networks
 take distance as an input, and a full battery's range (300-700 km) is beyond
 the paper's 20-200 km training trips. The default relative residual target
 (``HybridModel(residual_target="relative")``) carries over to longer trips
-much better than the paper's absolute one; ``evaluation/range_bands.md``
+much better than the paper's absolute one; ``evaluation/range_bands/range_bands.md``
 reports the coverage of the 10-90 % band on a known truth, split by whether
 the true range lies within the training distances.
 

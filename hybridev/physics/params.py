@@ -213,7 +213,7 @@ class DrivingProfile:
         Target positive kinetic energy per metre (m/s^2) of synthesised
         traces: the standard measure of how much speed variation a driver
         adds. Not in the paper; chosen so that the paper's baseline-scenario
-        table is reproduced (see ``evaluation/physics_reproduction.md``).
+        table is reproduced (see ``evaluation/physics_reproduction/physics_reproduction.md``).
     cycle_period_s : float
         Nominal duration of one accelerate-cruise-brake cycle, s.
     amplitude_cv : float
