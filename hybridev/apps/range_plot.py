@@ -7,7 +7,6 @@ import numpy as np
 import pandas as pd
 
 from hybridev.apps.range import (
-    _GRID,
     _MAX_ANCHOR_KM,
     _anchor_physics,
     _check_conditions,

@@ -55,7 +55,7 @@ def test_floor_formula():
     veh = VehicleParams()
     t = pd.DataFrame({"distance_km": [100.0, 100.0, 100.0], "avg_speed_kmh": [90.0] * 3,
                       "grade_pct": [0.0, 1.0, -30.0]})
-    flat, grade = floor_per_km(90.0, veh, 0.0)
+    flat, _ = floor_per_km(90.0, veh, 0.0)
     v = 25.0
     assert flat == pytest.approx(veh.mass_kg * 9.81 * veh.rolling_resistance_coef
                                  + 0.5 * 1.225 * veh.drag_area_m2 * v**2)

@@ -8,7 +8,6 @@ gives the paper's single MSE network on the nominal physics.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from hybridev.cli.inputs import (
     add_input_arguments,
