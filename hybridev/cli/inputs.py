@@ -181,17 +181,20 @@ def check_dir_out(option: str, path: str | os.PathLike | None) -> None:
         raise ValueError(f"{option}={str(path)!r} looks like a file name; it is a directory")
 
 
-def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None):
+def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
+               strict: bool | None = None):
     """Read a trip table with the shared options: (table, traces or None, rejected or None).
 
     ``measured``: a measured-trip table (validated by
     :func:`hybridev.data.logs.measured_from_frames`, rejected rows reported);
     else a trip table to predict on (summaries derived from the traces).
+    ``strict`` (default ``measured``): every ``--columns`` source must exist.
     """
     from hybridev.core.fileio import read_table
 
     mapping = column_mapping(args)
-    table = apply_columns(read_table(path), mapping, what=str(path), strict=measured)
+    strict = measured if strict is None else strict
+    table = apply_columns(read_table(path), mapping, what=str(path), strict=strict)
     ts_path = getattr(args, "timeseries", None)
     ts = None
     if ts_path is not None:

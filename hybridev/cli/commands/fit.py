@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         from hybridev.data.measured import validate_measured_trips
 
-        table, traces, _ = read_trips(args.measured, args, measured=False)
+        table, traces, _ = read_trips(args.measured, args, measured=False, strict=True)
         try:
             table, _ = validate_measured_trips(table, vehicle, on_error="raise")
         except ValueError as exc:

@@ -56,13 +56,13 @@ def run(args: argparse.Namespace) -> int:
 
     check_table_out("--out", args.out)
     check_table_out("--trips-out", args.trips_out)
-    if args.model is None:
-        raise ValueError("--model DIR is required: the plan needs the predictive energy "
-                         "distribution of a saved HybridModel")
     schedule = apply_columns(read_table(args.schedule), column_mapping(args),
                              what=str(args.schedule), strict=False)
     schedule = fill_soc_initial(schedule, args.soc_initial)
     tariff = read_table(args.tariff)
+    if args.model is None:
+        raise ValueError("--model DIR is required: the plan needs the predictive energy "
+                         "distribution of a saved HybridModel")
     from hybridev.learning.model import HybridModel
 
     model = model_with_vehicle(HybridModel.load(args.model), args)
