@@ -46,8 +46,12 @@ vectorised over (conditions x grid):
    non-decreasing in ``r`` (``numpy.maximum.accumulate``) and its first
    crossing of ``B`` is linearly interpolated, on 27 distances from
    ``r0 / 4`` to ``4 r0`` (ratio 1.075 between 0.45 and 2.2 ``r0``; grid
-   error below 0.3 %). A curve that stays below ``B`` up to ``4 r0`` (net
-   regeneration downhill, say) gives ``inf``.
+   error below 0.3 %) plus one beyond the distance at which the physical
+   energy floor (:mod:`hybridev.learning.physical`) reaches ``B``. Every
+   energy quantile is at least the floor, which grows linearly with
+   distance, so every curve crosses ``B`` and the range is finite (for any
+   vehicle with a non-zero road load); past the training distances the
+   networks see the longest training distance (the residual is held).
 
 Conformal calibration: the energy quantile ``p = 1 - q`` is an endpoint of the
 central interval of level ``|1 - 2q|``, so its spread factor is the model's
@@ -405,8 +409,8 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         (``(s0 - s_reserve) C``, kWh), ``range_km_physics`` (km, the physics
         model alone at its posterior median) and one column per quantile named
         by :func:`quantile_column` (``range_km_q10``, ``range_km_q50``,
-        ``range_km_q90`` by default), km; ``inf`` where the energy quantile
-        stays below the budget up to 4x the physics range.
+        ``range_km_q90`` by default), km; finite (bounded by the distance at
+        which the physical energy floor uses the budget).
 
     Examples
     --------

@@ -54,8 +54,7 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
         SoC at departure, in (0, 1].
     distances_km : array_like (n_points,), km, optional
         Finite, >= 0. Default: 61 points from 0 to 1.1 times the distance
-        reached with probability 5 % (``range_km_q95`` at reserve 0), or to
-        2,000 km if that is infinite.
+        reached with probability 5 % (``range_km_q95`` at reserve 0).
     seed : int
         Seeds the choice of posterior draws.
 
