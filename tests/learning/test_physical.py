@@ -2,8 +2,8 @@
 
 Property tests over 1-1,000 km, every speed and every temperature, for every
 kind of model in the suite: the paper's point model, the default probabilistic
-model, and a model fitted on short trips only (3.5-38 km, as a real logger's
-commute trips). Energy and interval bounds never fall below the physical floor;
+model, a model fitted on short trips only (3.5-38 km, as a real logger's
+commute trips) and the pure-ML baseline fitted on those. Energy and interval bounds never fall below the physical floor;
 the range is finite, its bands are ordered and it grows with the budget; the
 SoC fan never climbs on a flat road.
 """
@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from hybridev import PAPER_CONFIG, HybridModel, predict_range
 from hybridev.apps.range_plot import soc_fan
+from hybridev.learning.baselines import PureML
 from hybridev.learning.physical import (
     FLOOR_MARGIN,
     distance_hold,
@@ -48,6 +49,7 @@ def models():
         "paper": HybridModel(**PAPER_CONFIG, **common).fit(data, seed=0),
         "default": HybridModel(n_members=3, **common).fit(data, seed=0),
         "short": HybridModel(n_members=3, calibrate_physics=False, **common).fit(short, seed=0),
+        "pure_ml": PureML(n_members=3, **common).fit(short, seed=0),
     }
 
 
@@ -83,7 +85,7 @@ def test_training_distances_recorded_and_held(models, tmp_path):
     assert HybridModel.load(tmp_path / "m").fit_info_["distance_km_range"] == [lo, hi]
 
 
-@pytest.mark.parametrize("name", ["paper", "default", "short"])
+@pytest.mark.parametrize("name", ["paper", "default", "short", "pure_ml"])
 @SETTINGS
 @given(speed=st.floats(5.0, 200.0), temp=st.floats(-40.0, 50.0))
 def test_energy_physical_over_distance(models, name, speed, temp):
@@ -101,7 +103,7 @@ def test_energy_physical_over_distance(models, name, speed, temp):
         assert np.all(iv["energy_kwh_lo"].to_numpy() >= floor - 1e-12)
 
 
-@pytest.mark.parametrize("name", ["default", "short"])
+@pytest.mark.parametrize("name", ["default", "short", "pure_ml"])
 @SETTINGS
 @given(speed=st.floats(5.0, 200.0), temp=st.floats(-40.0, 50.0),
        soc=st.floats(0.05, 1.0), mode=st.sampled_from([None, "eco", "normal", "aggressive"]))
