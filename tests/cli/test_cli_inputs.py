@@ -84,7 +84,9 @@ def test_fit_derives_summaries_from_traces(logger, tmp_path, capsys):
     assert "does not match" in capsys.readouterr().err
     assert main(["range", "--soc", "0.8", "--speed", "50", "--temp", "10", "--model", str(out),
                  "--capacity-kwh", "100"]) == 0
-    assert "(80.0 kWh)" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "(80.0 kWh)" in printed
+    assert "beyond the longest training trip" in printed  # trained on <= 200 km trips
 
 
 def test_range_without_model_uses_coastdown(capsys):
