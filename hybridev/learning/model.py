@@ -170,7 +170,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         Per-epoch ``train_loss``/``val_loss`` (n_epochs, n_members),
         ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
     fit_info_ : dict
-        Trip counts, seed, fit time and validation-set errors.
+        Trip counts, seed, fit time, validation-set errors and
+        ``distance_km_range`` (shortest and longest fitting trip, km; past
+        them the residual is held, :mod:`hybridev.learning.physical`).
     posterior_ : PhysicsPosterior or None
         Physics posterior (``calibrate_physics=True``).
     conformal_ : NormalizedConformal or None
