@@ -46,8 +46,12 @@ vectorised over (conditions x grid):
    non-decreasing in ``r`` (``numpy.maximum.accumulate``) and its first
    crossing of ``B`` is linearly interpolated, on 27 distances from
    ``r0 / 4`` to ``4 r0`` (ratio 1.075 between 0.45 and 2.2 ``r0``; grid
-   error below 0.3 %). A curve that stays below ``B`` up to ``4 r0`` (net
-   regeneration downhill, say) gives ``inf``.
+   error below 0.3 %) plus one beyond the distance at which the physical
+   energy floor (:mod:`hybridev.learning.physical`) reaches ``B``. Every
+   energy quantile is at least the floor, which grows linearly with
+   distance, so every curve crosses ``B`` and the range is finite (for any
+   vehicle with a non-zero road load); past the training distances the
+   networks see the longest training distance (the residual is held).
 
 Conformal calibration: the energy quantile ``p = 1 - q`` is an endpoint of the
 central interval of level ``|1 - 2q|``, so its spread factor is the model's
@@ -80,6 +84,13 @@ import pandas as pd
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.learning.features import normalize_modes
 from hybridev.learning.model import HybridModel
+from hybridev.learning.physical import (
+    FLOOR_MARGIN,
+    MAX_DROP_M,
+    distance_hold,
+    floor_along,
+    floor_per_km,
+)
 from hybridev.learning.predictive import EnergyDistribution
 from hybridev.physics.validation import TRIP_RULES, check_table
 
@@ -252,7 +263,8 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
     """Energy quantiles (P, n, G) at distances r (n, G) and the physics energy (n, G), kWh."""
     knots, k_med, k_sd, vmax = curve
     kpk = _interp_log(knots, k_med, r)
-    e_med = kpk * r
+    e_floor = _floor(model, base, r)
+    e_med = np.maximum(kpk * r, e_floor)
     if not hasattr(model, "net_"):
         if warn:
             warnings.warn(f"{type(model).__name__} is not fitted: the range is the physics "
@@ -262,14 +274,17 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
     n, g = r.shape
     names = model.feature_names_
     x = np.repeat(model._features(base)[:, None, :], g, axis=1)
-    vary = {"distance_km": r, "max_speed_kmh": _interp_log(knots, vmax, r),
-            "energy_kwh_physics": e_med, "kwh_per_km_physics": kpk}
+    r_held = distance_hold(model, r)  # the networks see the training distances only
+    vary = {"distance_km": r_held, "max_speed_kmh": _interp_log(knots, vmax, r),
+            "energy_kwh_physics": kpk * r_held, "kwh_per_km_physics": kpk}
     for name, val in vary.items():
         if name in names:
             j = names.index(name)
             x[:, :, j] = (val - model.feature_mean_[j]) / model.feature_std_[j]
-    mean, var = model._residual_moments(x.reshape(n * g, -1),
-                                        model._target_scale(e_med.ravel(), r.ravel()))
+    factor = (np.ones_like(r) if model.residual_target == "relative" and model._residual
+              else r / r_held)  # absolute residual: held per km
+    mean, var = model._residual_moments(
+        x.reshape(n * g, -1), model._target_scale(e_med.ravel(), r.ravel()) * factor.ravel())
     std = np.full_like(mean, _MIN_STD_KWH) if var is None else np.sqrt(var)
     std = np.maximum(std, _MIN_STD_KWH)
     if model._residual:
@@ -283,8 +298,43 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
         sel = levels == lv
         dist = EnergyDistribution(draws, mean, std, spread_factor=_spread_factor(model, lv))
         out[sel] = dist.quantile(probs[sel])
-    floor = np.minimum(e_med, 0.0).ravel()  # as predict_interval: never below net regen
+    floor = e_floor.ravel()  # as predict_interval: never below the physical floor
     return np.maximum(out, floor).reshape(len(probs), n, g), e_med
+
+
+def _forces(model: HybridModel, base: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    grade = (base["grade_pct"].fillna(0.0).to_numpy(float) if "grade_pct" in base.columns
+             else np.zeros(len(base)))
+    return floor_per_km(base["avg_speed_kmh"].to_numpy(float), model._vehicle(), grade)
+
+
+def _floor(model: HybridModel, base: pd.DataFrame, r: np.ndarray) -> np.ndarray:
+    """Physical energy floor (n, G) at distances r (:mod:`hybridev.learning.physical`), kWh."""
+    flat, grade = _forces(model, base)
+    return floor_along(r, flat, grade, model._vehicle())
+
+
+def _floor_distance_km(model: HybridModel, base: pd.DataFrame, budget: np.ndarray
+                       ) -> np.ndarray:
+    """Distance (n,) at which the physical floor reaches the budget, km (inf if never)."""
+    flat, grade = _forces(model, base)
+    veh = model._vehicle()
+    need = budget * 3.6e6 / FLOOR_MARGIN  # J of ideal traction
+    drop = veh.mass_kg * veh.gravity_mps2 * MAX_DROP_M
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_a = np.where(flat + grade > 0, need / (flat + grade), np.inf)
+        d_b = np.where(flat > 0, (need + drop) / flat, np.inf)
+    d = np.where((grade >= 0) | (-grade * d_a <= drop), d_a, d_b)
+    return d / 1000.0
+
+
+def _distance_grid(model: HybridModel, base: pd.DataFrame, r0: np.ndarray,
+                   budget: np.ndarray) -> np.ndarray:
+    """Search distances (n, G + 1): ``r0 x _GRID`` and one beyond the floor's range."""
+    r = r0[:, None] * _GRID[None, :]
+    far = np.maximum(_floor_distance_km(model, base, budget), r[:, -1])
+    far = np.where(np.isfinite(far), far * 1.01, r[:, -1] * 2.0)
+    return np.concatenate([r, far[:, None]], axis=1)
 
 
 def _solve(r: np.ndarray, energy: np.ndarray, budget: np.ndarray) -> np.ndarray:
@@ -359,8 +409,8 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         (``(s0 - s_reserve) C``, kWh), ``range_km_physics`` (km, the physics
         model alone at its posterior median) and one column per quantile named
         by :func:`quantile_column` (``range_km_q10``, ``range_km_q50``,
-        ``range_km_q90`` by default), km; ``inf`` where the energy quantile
-        stays below the budget up to 4x the physics range.
+        ``range_km_q90`` by default), km; finite (bounded by the distance at
+        which the physical energy floor uses the budget).
 
     Examples
     --------
@@ -382,7 +432,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     s0, sr = _check_soc(soc_initial, soc_reserve, len(cond))
     budget = (s0 - sr) * model.capacity_kwh
     r0, curve, base = _range_curve(model, cond, s0, budget, seed)
-    r = r0[:, None] * _GRID[None, :]
+    r = _distance_grid(model, base, r0, budget)
     energy, e_phys = _energy_quantiles(model, base, r, curve, 1.0 - q)
     ranges = _solve(r, energy, budget)
     out = cond.copy()

@@ -7,12 +7,12 @@ import numpy as np
 import pandas as pd
 
 from hybridev.apps.range import (
-    _GRID,
     _MAX_ANCHOR_KM,
     _anchor_physics,
     _check_conditions,
     _check_model,
     _check_soc,
+    _distance_grid,
     _energy_quantiles,
     _range_curve,
     _solve,
@@ -39,6 +39,10 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
     of a trip of length ``r`` (built as in :func:`predict_range`, with anchors
     every factor ``sqrt(2)`` in distance over the plotted span, at most
     2,000 km), so its ``p``-quantile is ``s0 - Q_{1-p}(E(r)) / C``, clipped.
+    As :func:`predict_range`, it uses the non-decreasing envelope of each
+    energy quantile along distance, so the SoC never climbs with distance,
+    and energy is never below the physical floor
+    (:mod:`hybridev.learning.physical`).
 
     Parameters
     ----------
@@ -50,8 +54,7 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
         SoC at departure, in (0, 1].
     distances_km : array_like (n_points,), km, optional
         Finite, >= 0. Default: 61 points from 0 to 1.1 times the distance
-        reached with probability 5 % (``range_km_q95`` at reserve 0), or to
-        2,000 km if that is infinite.
+        reached with probability 5 % (``range_km_q95`` at reserve 0).
     seed : int
         Seeds the choice of posterior draws.
 
@@ -86,7 +89,7 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
     if distances_km is None:
         budget = s0 * cap
         r0, curve, base = _range_curve(model, cond, s0, budget, seed)
-        r = r0[:, None] * _GRID[None, :]
+        r = _distance_grid(model, base, r0, budget)
         far = _solve(r, _energy_quantiles(model, base, r, curve, probs[-1:], warn=False)[0],
                      budget)[0, 0]
         d_max = 1.1 * far if np.isfinite(far) else 2.0 * _MAX_ANCHOR_KM
@@ -109,9 +112,15 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
         knots = np.geomspace(lo, hi, n_knots)[None, :] if hi > lo else np.array([[hi]])
         k_med, k_sd, vmax, table = _anchor_physics(model, cond, s0, knots, seed)
         base = table.iloc[:1].reset_index(drop=True)
-        energy, _ = _energy_quantiles(model, base, dist[pos][None, :],
+        d_pos = dist[pos]
+        order = np.argsort(d_pos, kind="stable")
+        energy, _ = _energy_quantiles(model, base, d_pos[order][None, :],
                                       (knots, k_med, k_sd, vmax), probs)
-        soc[:, pos] = np.clip(s0 - energy[:, 0, :] / cap, 0.0, 1.0)
+        # energy never falls as the distance grows (the SoC never climbs on the way)
+        e = np.maximum.accumulate(energy[:, 0, :], axis=-1)
+        e_sorted = np.empty_like(e)
+        e_sorted[:, order] = e
+        soc[:, pos] = np.clip(s0 - e_sorted / cap, 0.0, 1.0)
     for p, col in zip(FAN_QUANTILES, soc, strict=True):
         out[quantile_column("soc", p)] = col
     return out

@@ -62,6 +62,7 @@ from hybridev.learning.features import (
 from hybridev.learning.inputs import _check_range, validate_prediction_trips
 from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
+from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.predictive import soc_from_energy
 from hybridev.learning.uncertainty import ProbabilisticMixin
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
@@ -169,7 +170,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         Per-epoch ``train_loss``/``val_loss`` (n_epochs, n_members),
         ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
     fit_info_ : dict
-        Trip counts, seed, fit time and validation-set errors.
+        Trip counts, seed, fit time, validation-set errors and
+        ``distance_km_range`` (shortest and longest fitting trip, km; past
+        them the residual is held, :mod:`hybridev.learning.physical`).
     posterior_ : PhysicsPosterior or None
         Physics posterior (``calibrate_physics=True``).
     conformal_ : NormalizedConformal or None
@@ -463,12 +466,14 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
             seed=int(torch_ss.generate_state(1)[0]), progress=progress)
         self.net_ = net
         self.history_ = hist
+        d_fit = good["distance_km"].to_numpy(float)[np.sort(order[n_cal:])]
+        self.fit_info_ = {"distance_km_range": [float(d_fit.min()), float(d_fit.max())]}
         self.n_parameters_ = net.n_parameters_per_member
         if n_cal:
             _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed), traces=traces)
             self.conformal_ = NormalizedConformal.fit(e_meas[cal_idx], dist.mean(), dist.std())
         info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
-                "seed": int(seed),
+                "seed": int(seed), **self.fit_info_,
                 "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
                 "n_parameters_per_member": self.n_parameters_}
         if n_val:
@@ -498,6 +503,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
             (``energy_kwh_physics``, ``soc_final_physics``, ``max_speed_kmh``,
             ``kwh_per_km_physics``) plus ``energy_kwh_pred`` (kWh, the mean
             over members) and ``soc_final_pred`` (``s0 - E/C`` clipped to [0, 1]).
+            A fitted model's energy is never below the physical floor and its
+            networks hold the residual outside the training distances
+            (:mod:`hybridev.learning.physical`).
             With a physics posterior (``calibrate_physics=True``) the physics
             columns are those of the posterior-median parameters.
 
@@ -512,9 +520,11 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         out = self._physics(trips, as_traces(timeseries))  # validates the trips
         e_phys = out["energy_kwh_physics"].to_numpy(float)
         if hasattr(self, "net_"):
-            scale = self._target_scale(e_phys, out["distance_km"].to_numpy(float))
+            held, factor = held_feature_table(self, out)  # learning.physical
+            scale = self._target_scale(e_phys, out["distance_km"].to_numpy(float)) * factor
             energy = self._combine(e_phys,
-                                   self._residual_moments(self._features(out), scale)[0].mean(0))
+                                   self._residual_moments(self._features(held), scale)[0].mean(0))
+            energy = np.maximum(energy, energy_floor_kwh(out, self._vehicle()))
         else:
             warnings.warn(f"{type(self).__name__} is not fitted: energy_kwh_pred is the physics "
                           "prediction only (energy_kwh_physics); fit it on measured trips to "

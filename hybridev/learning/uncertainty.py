@@ -27,7 +27,8 @@ interval would over-cover, and the interval is the one-sided
 ``E_lo'`` at the same level.
 
 Energy bounds are floored like the point prediction (at ``min(E_p, 0)``, see
-:mod:`hybridev.learning.model`), the one-sided bound is capped at the point prediction
+:mod:`hybridev.learning.model`, and at the physical floor of
+:mod:`hybridev.learning.physical`), the one-sided bound is capped at the point prediction
 (so every interval contains it), and SoC is clipped to [0, 1]
 (:func:`hybridev.learning.predictive.soc_from_energy`). An unfitted model raises
 :class:`sklearn.exceptions.NotFittedError` (only ``predict`` falls back to the
@@ -60,6 +61,7 @@ from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.trips import with_physics_columns
@@ -156,8 +158,9 @@ class ProbabilisticMixin:
             table = self._physics(trips, traces)
             draws = table["energy_kwh_physics"].to_numpy(float)[None, :]
         e_p = table["energy_kwh_physics"].to_numpy(float)
-        scale = self._target_scale(e_p, table["distance_km"].to_numpy(float))
-        mean, var = self._residual_moments(self._features(table), scale)
+        held, factor = held_feature_table(self, table)  # learning.physical
+        scale = self._target_scale(e_p, table["distance_km"].to_numpy(float)) * factor
+        mean, var = self._residual_moments(self._features(held), scale)
         std = np.zeros_like(mean) if var is None else np.sqrt(var)
         if not self._residual:  # PureML: no physics part
             centred = np.zeros_like(draws)
@@ -270,6 +273,7 @@ class ProbabilisticMixin:
         mu, sd = dist.mean(), dist.std()
         e_p = table["energy_kwh_physics"].to_numpy(float)
         floor = np.minimum(e_p, 0.0) if self._residual else np.zeros_like(e_p)
+        floor = np.maximum(floor, energy_floor_kwh(table, self._vehicle()))  # learning.physical
         if q is not None:
             lo, hi = mu - q * sd, mu + q * sd
             lo_one = self.conformal_.lower_bound(mu, sd, level)

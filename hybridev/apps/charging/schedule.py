@@ -25,8 +25,9 @@ Schedule table
 One row per planned trip: ``departure`` (h or ts, within the horizon; rows
 may come in any order, they are sorted), optional ``duration_h`` (h, > 0;
 default ``distance_km / avg_speed_kmh``), the trip columns ``distance_km``,
-``avg_speed_kmh``, ``mode``, ``temperature_c`` (ranges as in
-:func:`hybridev.validate_trips`), and optionally ``trip_id``, ``grade_pct``,
+``avg_speed_kmh``, ``temperature_c`` (ranges as in
+:func:`hybridev.validate_trips`), and optionally ``mode`` (may be missing or
+empty, as for predictions), ``trip_id``, ``grade_pct``,
 ``hour`` and ``soc_initial`` (see :func:`model_trip_table`). Trips must not
 overlap (back-to-back is allowed).
 
@@ -52,7 +53,7 @@ __all__ = [
     "parse_problem",
 ]
 
-SCHEDULE_REQUIRED = ("departure", "distance_km", "avg_speed_kmh", "mode", "temperature_c")
+SCHEDULE_REQUIRED = ("departure", "distance_km", "avg_speed_kmh", "temperature_c")
 """Columns every schedule must have."""
 
 TARIFF_REQUIRED = ("start", "price_per_kwh")
@@ -240,7 +241,7 @@ def parse_problem(schedule: pd.DataFrame, tariff: pd.DataFrame, *, soc_now, capa
     if not isinstance(schedule, pd.DataFrame):
         raise ValueError(f"schedule must be a pandas DataFrame; got {type(schedule).__name__}")
     good, _ = check_table(schedule, required=SCHEDULE_REQUIRED, rules=_SCHEDULE_RULES,
-                          what="schedule")
+                          mode_required=False, what="schedule")  # mode optional, as in predict
     ts, h = _times(good["departure"], "schedule 'departure'")
     if (ts is None) != (t0 is None):
         kinds = ("timestamps", "hours") if ts is not None else ("hours", "timestamps")

@@ -5,6 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+from hybridev.cli.inputs import (
+    add_input_arguments,
+    add_vehicle_arguments,
+    check_dir_out,
+    read_trips,
+    report_rejected,
+    vehicle_from_args,
+)
+
 NAME = "calibrate"
 HELP = ("fit the physics posterior and the hybrid model on measured trips and write a "
         "held-out calibration report (HTML + JSON)")
@@ -13,9 +22,6 @@ HELP = ("fit the physics posterior and the hybrid model on measured trips and wr
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("measured", help="measured trips, .csv or .parquet (trip columns plus "
                                     "energy_kwh and/or soc_final; mode optional)")
-    p.add_argument("--timeseries", default=None,
-                   help="logged time series, .csv or .parquet (trip_id, t_s, speed_kmh; "
-                        "optional elevation_m or grade_pct, amb_temp_c, soc)")
     p.add_argument("--out", required=True, help="report directory (replaced atomically)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--level", type=float, default=0.9,
@@ -28,43 +34,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--group-column", default="session_group",
                    help="hold out whole groups of this column when present "
                         "(default session_group; else a random split)")
-    p.add_argument("--coastdown", type=float, nargs=4, default=None,
-                   metavar=("A_N", "B_N_PER_KMH", "C_N_PER_KMH2", "MASS_KG"),
-                   help="nominal vehicle from coast-down coefficients and test mass "
-                        "(default: the paper's vehicle)")
-    p.add_argument("--capacity-kwh", type=float, default=None,
-                   help="battery capacity, kWh (default: the vehicle's)")
+    p.add_argument("--save-model", default=None, metavar="DIR",
+                   help="also fit the hybrid model on all valid trips (the report's settings) "
+                        "and save it to DIR, for predict, range and plan-charging")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-def _vehicle(args: argparse.Namespace):
-    from hybridev.physics.params import VehicleParams
-
-    extra = {} if args.capacity_kwh is None else {"battery_capacity_kwh": args.capacity_kwh}
-    try:
-        if args.coastdown is not None:
-            return VehicleParams.from_coastdown(*args.coastdown, **extra)
-        return VehicleParams(**extra)
-    except TypeError as exc:  # pragma: no cover - argparse fixes the arity
-        raise ValueError(str(exc)) from exc
+    add_input_arguments(p)
+    add_vehicle_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.report.build import calibration_report
-    from hybridev.data.logs import read_measured_trips
+    from hybridev.data.logs import MeasuredTrips
 
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
-    vehicle = _vehicle(args)
-    measured = read_measured_trips(args.measured, args.timeseries, vehicle)
-    n_bad = measured.n_rejected
-    if n_bad:
-        print(f"hybridev calibrate: rejected {n_bad} row(s)/trace(s) of {args.measured} "
-              "(listed in the report):", file=sys.stderr)
-        for r in measured.rejected.head(5).itertuples():
-            print(f"  {r.source} row {r.row}: {r.reason}", file=sys.stderr)
-        if n_bad > 5:
-            print(f"  ... and {n_bad - 5} more", file=sys.stderr)
+    check_dir_out("--out", args.out)
+    check_dir_out("--save-model", args.save_model)
+    vehicle = vehicle_from_args(args)
+    trips, traces, rejected = read_trips(args.measured, args, measured=True, vehicle=vehicle)
+    measured = MeasuredTrips(trips, traces, rejected)
+    if measured.n_rejected:
+        print("(the rejected rows are listed in the report)", file=sys.stderr)
+        report_rejected(NAME, args.measured, rejected, limit=5)
     summary = calibration_report(
         measured, out_dir=args.out, vehicle=vehicle, seed=args.seed, level=args.level,
         n_members=args.members, test_fraction=args.test_fraction,
@@ -76,4 +67,20 @@ def run(args: argparse.Namespace) -> int:
           f"calibrated {m['calibrated']['mape_pct']:.1f} %, hybrid "
           f"{m['hybrid']['mape_pct']:.1f} %; hybrid {args.level:.0%} coverage {cov:.2f}")
     print(f"wrote report to {args.out}/report.html")
+    if args.save_model is not None:
+        _save_model(args, summary, measured, vehicle)
     return 0
+
+
+def _save_model(args: argparse.Namespace, summary: dict, measured, vehicle) -> None:
+    """Fit the report's hybrid settings on all valid trips and save the model."""
+    from hybridev.learning.model import HybridModel
+
+    params = dict(summary["config"]["model_params"])
+    keep = set(HybridModel().get_params()) - {"vehicle"}
+    params = {k: (tuple(v) if isinstance(v, list) else v) for k, v in params.items()
+              if k in keep}
+    model = HybridModel(vehicle, **params).fit(measured, seed=args.seed)
+    model.save(args.save_model)
+    print(f"wrote model (fitted on all {model.fit_info_['n_trips']} valid trips) to "
+          f"{args.save_model}")

@@ -8,7 +8,16 @@ gives the paper's single MSE network on the nominal physics.
 from __future__ import annotations
 
 import argparse
-import sys
+
+from hybridev.cli.inputs import (
+    add_input_arguments,
+    add_vehicle_arguments,
+    check_dir_out,
+    hint_missing_soc,
+    read_trips,
+    report_rejected,
+    vehicle_from_args,
+)
 
 NAME = "fit"
 HELP = "train the hybrid physics + residual model on a measured-trip table and save it"
@@ -17,8 +26,11 @@ HELP = "train the hybrid physics + residual model on a measured-trip table and s
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("measured", help="measured trips, .csv or .parquet (trip columns plus "
-                                    "energy_kwh and/or soc_final)")
+                                    "energy_kwh and/or soc_final; mode optional; with "
+                                    "--timeseries the summaries may be missing)")
     p.add_argument("--out", required=True, help="model directory to write (replaced atomically)")
+    add_input_arguments(p)
+    add_vehicle_arguments(p)
     p.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     p.add_argument("--members", type=int, default=None,
                    help="ensemble size (default 5, a deep ensemble; 1 = the paper's single "
@@ -48,21 +60,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hybridev.core.fileio import read_table
     from hybridev.core.progress import progress_bar
-    from hybridev.data.measured import validate_measured_trips
     from hybridev.learning.model import HybridModel
 
-    table = read_table(args.measured)
-    if args.skip_bad_rows:
-        table, rejected = validate_measured_trips(table, on_error="collect")
-        if len(rejected):
-            print(f"hybridev fit: rejected {len(rejected)} row(s) of {args.measured}:",
-                  file=sys.stderr)
-            for r in rejected.head(10).itertuples():
-                print(f"  row {r.row}: {r.reason}", file=sys.stderr)
-            if len(rejected) > 10:
-                print(f"  ... and {len(rejected) - 10} more", file=sys.stderr)
+    check_dir_out("--out", args.out)
+    vehicle = vehicle_from_args(args)
+    if args.skip_bad_rows or args.timeseries is not None:
+        table, traces, rejected = read_trips(args.measured, args, measured=True,
+                                             vehicle=vehicle)
+        report_rejected(NAME, args.measured, rejected)
+        if len(rejected) and not args.skip_bad_rows:
+            raise ValueError(f"{len(rejected)} row(s)/trace(s) of {args.measured} were rejected "
+                             f"(listed above; first: {rejected['reason'].iloc[0]}); fix them "
+                             "or pass --skip-bad-rows to fit on the valid ones")
+    else:
+        from hybridev.data.measured import validate_measured_trips
+
+        table, traces, _ = read_trips(args.measured, args, measured=False, strict=True)
+        try:
+            table, _ = validate_measured_trips(table, vehicle, on_error="raise")
+        except ValueError as exc:
+            raise hint_missing_soc(exc) from exc
     from hybridev.learning.model import PAPER_CONFIG
 
     config = dict(PAPER_CONFIG) if args.paper else {}
@@ -71,9 +89,9 @@ def run(args: argparse.Namespace) -> int:
                         ("conformal_fraction", args.conformal_fraction)):
         if value is not None:
             config[name] = value
-    model = HybridModel(**config, max_epochs=args.max_epochs, n_steps=args.n_steps)
+    model = HybridModel(vehicle, **config, max_epochs=args.max_epochs, n_steps=args.n_steps)
     with progress_bar(total=args.max_epochs, unit="epoch", desc="fit", quiet=args.quiet) as bar:
-        model.fit(table, seed=args.seed, progress=bar.update_to)
+        model.fit(table, seed=args.seed, progress=bar.update_to, timeseries=traces)
     model.save(args.out)
     info = model.fit_info_
     msg = (f"fitted on {info['n_train']} trips ({info['n_val']} held out for early stopping, "

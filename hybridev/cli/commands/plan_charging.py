@@ -4,13 +4,24 @@ from __future__ import annotations
 
 import argparse
 
+from hybridev.cli.inputs import (
+    add_input_arguments,
+    add_vehicle_arguments,
+    apply_columns,
+    check_table_out,
+    column_mapping,
+    fill_soc_initial,
+    model_with_vehicle,
+)
+
 NAME = "plan-charging"
 HELP = "cheapest charging plan keeping P(SoC < soc_min) below a risk level"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("schedule", help="trip schedule .csv/.parquet (departure, distance_km, "
-                   "avg_speed_kmh, mode, temperature_c; optional duration_h, trip_id)")
+                   "avg_speed_kmh, temperature_c; optional mode, duration_h, trip_id; "
+                   "'hybridev example-data DIR' writes an example)")
     p.add_argument("--tariff", required=True,
                    help="tariff .csv/.parquet with start, price_per_kwh (regular slots)")
     p.add_argument("--soc-now", type=float, required=True, help="SoC at the start, [0, 1]")
@@ -35,20 +46,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="plan for mean energies only (no chance constraint)")
     p.add_argument("--out", default="plan.csv", help="plan per slot, .csv/.parquet (default plan.csv)")
     p.add_argument("--trips-out", default=None, help="optional per-trip table, .csv/.parquet")
+    add_input_arguments(p, timeseries=False)
+    add_vehicle_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.charging.plan import plan_charging
     from hybridev.core.fileio import read_table, write_table
 
-    schedule = read_table(args.schedule)
+    check_table_out("--out", args.out)
+    check_table_out("--trips-out", args.trips_out)
+    schedule = apply_columns(read_table(args.schedule), column_mapping(args),
+                             what=str(args.schedule), strict=False)
+    schedule = fill_soc_initial(schedule, args.soc_initial)
     tariff = read_table(args.tariff)
     if args.model is None:
         raise ValueError("--model DIR is required: the plan needs the predictive energy "
                          "distribution of a saved HybridModel")
     from hybridev.learning.model import HybridModel
 
-    model = HybridModel.load(args.model)
+    model = model_with_vehicle(HybridModel.load(args.model), args)
     result = plan_charging(
         model, schedule, soc_now=args.soc_now, tariff=tariff, charger_kw=args.charger_kw,
         charge_efficiency=args.efficiency, soc_min=args.soc_min, soc_max=args.soc_max,

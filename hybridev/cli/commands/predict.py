@@ -17,6 +17,15 @@ from __future__ import annotations
 
 import argparse
 
+from hybridev.cli.inputs import (
+    add_input_arguments,
+    add_vehicle_arguments,
+    check_table_out,
+    model_with_vehicle,
+    read_trips,
+    report_rejected,
+)
+
 NAME = "predict"
 HELP = "predict trip energy and final SoC (with intervals) with a model saved by 'hybridev fit'"
 
@@ -36,25 +45,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write point predictions only (no interval columns)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the physics posterior draws (default 0)")
+    add_input_arguments(p)
+    add_vehicle_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from hybridev.core.fileio import read_table, write_table
+    from hybridev.cli.inputs import hint_missing_soc
+    from hybridev.core.fileio import write_table
     from hybridev.learning.model import HybridModel
 
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
-    model = HybridModel.load(args.model)
-    trips = read_table(args.trips)
+    check_table_out("--out", args.out)
+    model = model_with_vehicle(HybridModel.load(args.model), args)
+    trips, traces, rejected = read_trips(args.trips, args, measured=False)
+    report_rejected(NAME, args.timeseries, rejected)
     calibrated = getattr(model, "conformal_", None) is not None
-    if args.level is not None or (calibrated and not args.point):
-        level = DEFAULT_LEVEL if args.level is None else args.level
-        out = model.predict_interval(trips, level, seed=args.seed)
-        what = f"predictions with {level:g} intervals" + ("" if calibrated
-                                                          else " (not conformally calibrated)")
-    else:
-        out = model.predict(trips)
-        what = "predictions"
+    try:
+        if args.level is not None or (calibrated and not args.point):
+            level = DEFAULT_LEVEL if args.level is None else args.level
+            out = model.predict_interval(trips, level, seed=args.seed, timeseries=traces)
+            what = f"predictions with {level:g} intervals" + (
+                "" if calibrated else " (not conformally calibrated)")
+        else:
+            out = model.predict(trips, timeseries=traces)
+            what = "predictions"
+    except ValueError as exc:
+        raise hint_missing_soc(exc) from exc
     write_table(out, args.out)
     print(f"wrote {len(out)} {what} to {args.out}")
     return 0

@@ -7,6 +7,8 @@ import math
 import warnings
 from pathlib import Path
 
+from hybridev.cli.inputs import add_vehicle_arguments, model_with_vehicle, vehicle_from_args
+
 NAME = "range"
 HELP = "predict the range (q10/q50/q90 km) to a SoC reserve, optionally with a SoC fan chart"
 
@@ -29,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "physics model's alone (no bands)")
     p.add_argument("--plot", default=None, help="save the SoC fan chart (.png, .pdf or .svg)")
     p.add_argument("--seed", type=int, default=0, help="posterior-draw seed (default 0)")
+    add_vehicle_arguments(p)
 
 
 def _check(option: str, value, lo: float, hi: float, lo_open=False, hi_open=False) -> None:
@@ -65,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     if args.grade is not None:
         row["grade_pct"] = args.grade
     cond = pd.DataFrame([row])
-    model = HybridModel() if args.model is None else HybridModel.load(args.model)
+    model = (HybridModel(vehicle_from_args(args)) if args.model is None
+             else model_with_vehicle(HybridModel.load(args.model), args))
     fitted = hasattr(model, "net_")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)
@@ -83,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
                           ("range_km_q90", "reached with probability 10 %")):
             print(f"  {col[len('range_km_'):]}  {out[col]:7.1f} km   ({note})")
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
+        span = model.fit_info_.get("distance_km_range")
+        if span and out["range_km_q90"] > span[1]:
+            print(f"  note: beyond the longest training trip ({span[1]:.0f} km) the learned "
+                  "residual is held at its value there (hybridev.learning.physical)")
     else:
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
         print("  note: no --model given, so no bands: q10/q50/q90 need a fitted model "

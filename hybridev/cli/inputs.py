@@ -1,0 +1,236 @@
+"""Options shared by the subcommands: the vehicle, a logger's columns, logged traces, outputs.
+
+* ``--coastdown A B C MASS`` and ``--capacity-kwh``: the vehicle
+  (:meth:`hybridev.VehicleParams.from_coastdown`); a saved model carries its
+  vehicle, so with ``--model`` a different road load is an error and
+  ``--capacity-kwh`` only changes how energy maps to SoC.
+* ``--columns old=new,...`` and/or ``--columns-file map.csv`` (two columns
+  ``old,new``): rename a logger's columns to the contract before anything
+  else. The same mapping applies to the time series (columns it lacks are
+  skipped there).
+* ``--soc-initial S``: fills a missing or empty ``soc_initial`` (a logger
+  without SoC). With ``energy_kwh`` measured, the SoC at departure only enters
+  as a network input and in ``soc_final_*``.
+* ``--timeseries FILE``: logged traces; missing trip summaries
+  (``distance_km``, ``avg_speed_kmh``, ``temperature_c``, ``soc_initial``) are
+  derived from them, and the physics runs on them.
+
+Every check runs before any work; errors are ``ValueError`` (exit code 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+__all__ = ["TABLE_SUFFIXES", "add_input_arguments", "add_vehicle_arguments",
+           "apply_columns", "check_dir_out", "check_table_out", "column_mapping",
+           "fill_soc_initial", "hint_missing_soc", "model_with_vehicle", "read_trips",
+           "report_rejected", "vehicle_from_args"]
+
+TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+
+
+def add_vehicle_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--coastdown", type=float, nargs=4, default=None,
+                   metavar=("A_N", "B_N_PER_KMH", "C_N_PER_KMH2", "MASS_KG"),
+                   help="your vehicle from its coast-down road load F = A + B v + C v^2 "
+                        "(v in km/h) and test mass (default: the paper's vehicle)")
+    p.add_argument("--capacity-kwh", type=float, default=None,
+                   help="usable battery capacity, kWh (maps energy to SoC; default: the "
+                        "vehicle's, 75 kWh for the paper's)")
+
+
+def add_input_arguments(p: argparse.ArgumentParser, *, timeseries: bool = True) -> None:
+    p.add_argument("--columns", default=None, metavar="OLD=NEW,...",
+                   help="rename your logger's columns to the contract first, e.g. "
+                        "mean_speed_kmh=avg_speed_kmh,e_batt_net_kwh=energy_kwh")
+    p.add_argument("--columns-file", default=None, metavar="FILE",
+                   help="the same mapping as a .csv with columns old,new")
+    p.add_argument("--soc-initial", type=float, default=None, metavar="S",
+                   help="SoC at departure, [0, 1], for rows without one (a logger without "
+                        "SoC: with energy_kwh measured it is only a network input)")
+    if timeseries:
+        p.add_argument("--timeseries", default=None, metavar="FILE",
+                       help="logged time series, .csv or .parquet (trip_id, t_s, speed_kmh; "
+                            "optional elevation_m or grade_pct, amb_temp_c, soc): the physics "
+                            "runs on the traces and missing trip summaries are derived")
+
+
+def vehicle_from_args(args: argparse.Namespace):
+    """The :class:`~hybridev.VehicleParams` of ``--coastdown`` / ``--capacity-kwh``."""
+    from hybridev.physics.params import VehicleParams
+
+    cap = getattr(args, "capacity_kwh", None)
+    extra = {} if cap is None else {"battery_capacity_kwh": cap}
+    cd = getattr(args, "coastdown", None)
+    if cd is not None:
+        return VehicleParams.from_coastdown(*cd, **extra)
+    return VehicleParams(**extra)
+
+
+def model_with_vehicle(model, args: argparse.Namespace):
+    """Check ``--coastdown`` against a loaded model; apply ``--capacity-kwh``."""
+    import dataclasses
+
+    veh = model._vehicle()
+    if getattr(args, "coastdown", None) is not None:
+        want = vehicle_from_args(args)
+        fields = [f.name for f in dataclasses.fields(veh)
+                  if f.name not in ("battery_capacity_kwh", "source")]
+        if any(getattr(want, f) != getattr(veh, f) for f in fields):
+            raise ValueError(f"--coastdown={args.coastdown!r} does not match the saved model's "
+                             f"vehicle ({veh.source}); the road load is fixed when fitting: "
+                             "re-fit with --coastdown, or leave it out here")
+    if getattr(args, "capacity_kwh", None) is not None:
+        model.vehicle = dataclasses.replace(veh, battery_capacity_kwh=args.capacity_kwh)
+        model._check_params()
+    return model
+
+
+def column_mapping(args: argparse.Namespace) -> dict[str, str]:
+    """``--columns`` and ``--columns-file`` as one ``{old: new}`` dict."""
+    mapping: dict[str, str] = {}
+    if getattr(args, "columns_file", None):
+        from hybridev.core.fileio import read_table
+
+        t = read_table(args.columns_file)
+        if list(t.columns[:2]) != ["old", "new"]:
+            raise ValueError(f"--columns-file={args.columns_file!r} must have the columns "
+                             f"old,new; got {list(t.columns)}")
+        mapping.update(zip(t["old"].astype(str).str.strip(), t["new"].astype(str).str.strip(),
+                           strict=True))
+    spec = getattr(args, "columns", None)
+    if spec:
+        for item in spec.split(","):
+            old, sep, new = item.partition("=")
+            old, new = old.strip(), new.strip()
+            if not sep or not old or not new:
+                raise ValueError(f"--columns item {item!r} must be OLD=NEW (e.g. "
+                                 "mean_speed_kmh=avg_speed_kmh)")
+            mapping[old] = new
+    news = list(mapping.values())
+    dup = sorted({n for n in news if news.count(n) > 1})
+    if dup:
+        raise ValueError(f"--columns maps several columns to {dup}; each new name once")
+    return mapping
+
+
+def apply_columns(table, mapping: dict[str, str], *, what: str, strict: bool = True):
+    """Rename ``table``'s columns; ``strict``: every old name must exist."""
+    if not mapping:
+        return table
+    present = {o: n for o, n in mapping.items() if o in table.columns}
+    if strict:
+        missing = [o for o in mapping if o not in table.columns]
+        if missing:
+            raise ValueError(f"--columns: {what} has no column(s) {missing}; its columns: "
+                             f"{list(table.columns)}")
+    clash = [n for o, n in present.items() if n in table.columns and n not in present]
+    if clash:
+        raise ValueError(f"--columns: {what} already has column(s) {clash}; map them away "
+                         "first (e.g. old_name=unused_name) or pick another source column")
+    return table.rename(columns=present)
+
+
+def fill_soc_initial(table, soc_initial: float | None):
+    """Fill a missing or empty ``soc_initial`` with ``--soc-initial``."""
+    if soc_initial is None:
+        return table
+    if not 0.0 <= soc_initial <= 1.0:
+        raise ValueError(f"--soc-initial={soc_initial!r} is outside the allowed range [0, 1]")
+    if "soc_initial" not in table.columns:
+        return table.assign(soc_initial=soc_initial)
+    return table.assign(soc_initial=table["soc_initial"].fillna(soc_initial))
+
+
+def hint_missing_soc(exc: ValueError) -> ValueError:
+    """Add what to do to a 'missing soc_initial' error."""
+    msg = str(exc)
+    if "soc_initial" in msg and "missing" in msg:
+        return ValueError(msg + "; a logger without SoC: give --soc-initial S (e.g. 0.9), "
+                          "and map your energy column to energy_kwh with --columns")
+    return exc
+
+
+def check_table_out(option: str, path: str | os.PathLike | None) -> None:
+    """Before any work: ``path`` ends in a table suffix and its folder can be written."""
+    if path is None:
+        return
+    p = Path(path)
+    if p.suffix.lower() not in TABLE_SUFFIXES:
+        raise ValueError(f"{option}={str(path)!r} must end in one of {list(TABLE_SUFFIXES)}")
+    if p.is_dir():
+        raise ValueError(f"{option}={str(path)!r} is a directory; give a file name")
+    anc = p.parent
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
+        raise ValueError(f"{option}={str(path)!r} is not writable: {str(anc)!r}")
+
+
+def check_dir_out(option: str, path: str | os.PathLike | None) -> None:
+    """Before any work: ``path`` is a directory name, not a file with a table suffix."""
+    if path is None:
+        return
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{option}={str(path)!r} is an existing file; give a directory")
+    if p.suffix.lower() in (*TABLE_SUFFIXES, ".json", ".html"):
+        raise ValueError(f"{option}={str(path)!r} looks like a file name; it is a directory")
+
+
+def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
+               strict: bool | None = None):
+    """Read a trip table with the shared options: (table, traces or None, rejected or None).
+
+    ``measured``: a measured-trip table (validated by
+    :func:`hybridev.data.logs.measured_from_frames`, rejected rows reported);
+    else a trip table to predict on (summaries derived from the traces).
+    ``strict`` (default ``measured``): every ``--columns`` source must exist.
+    """
+    from hybridev.core.fileio import read_table
+
+    mapping = column_mapping(args)
+    strict = measured if strict is None else strict
+    table = apply_columns(read_table(path), mapping, what=str(path), strict=strict)
+    ts_path = getattr(args, "timeseries", None)
+    ts = None
+    if ts_path is not None:
+        ts = apply_columns(read_table(ts_path), mapping, what=str(ts_path), strict=False)
+    if ts is None or "soc" not in ts.columns:  # a logged soc comes first
+        table = fill_soc_initial(table, getattr(args, "soc_initial", None))
+    try:
+        if measured:
+            from hybridev.data.logs import measured_from_frames
+
+            m = measured_from_frames(table, ts, vehicle)
+            return m.trips, m.traces, m.rejected
+        if ts is None:
+            return table, None, None
+        from hybridev.data.logs import _derive_from_traces
+        from hybridev.data.timeseries import validate_timeseries
+
+        if "trip_id" not in table.columns:
+            raise ValueError("trips need a 'trip_id' column to be matched with a time series")
+        traces, rejected = validate_timeseries(ts)
+        table = fill_soc_initial(_derive_from_traces(table, traces),
+                                 getattr(args, "soc_initial", None))
+        return table, traces, rejected
+    except ValueError as exc:
+        raise hint_missing_soc(exc) from exc
+
+
+def report_rejected(command: str, source: str, rejected, limit: int = 10) -> None:
+    """Print rejected rows (source, row, reason) to stderr."""
+    import sys
+
+    if rejected is None or len(rejected) == 0:
+        return
+    print(f"hybridev {command}: rejected {len(rejected)} row(s)/trace(s) of {source}:",
+          file=sys.stderr)
+    for r in rejected.head(limit).itertuples():
+        print(f"  {getattr(r, 'source', 'trips')} row {r.row}: {r.reason}", file=sys.stderr)
+    if len(rejected) > limit:
+        print(f"  ... and {len(rejected) - limit} more", file=sys.stderr)

@@ -1,0 +1,137 @@
+"""Shared CLI options (hybridev.cli.inputs): a logger's columns, no SoC, traces, vehicle, outputs."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev import HybridModel
+from hybridev.cli.main import main
+from hybridev.physics.kinematics import synthesize_speed_trace
+from hybridev.physics.truth import make_dataset
+
+FAST = ["--max-epochs", "5", "--members", "2", "--n-steps", "100", "--quiet",
+        "--no-calibrate-physics"]
+
+
+@pytest.fixture(scope="module")
+def logger(tmp_path_factory):
+    """A logger's table (its own column names, no SoC) and traces; 70 trips."""
+    d = tmp_path_factory.mktemp("logger")
+    t = make_dataset(70, truth="structured", seed=2, n_steps=100)
+    v, dt = synthesize_speed_trace(t.distance_km, t.avg_speed_kmh, list(t["mode"]),
+                                   n_steps=1000, seed=3, trip_keys=t.trip_id)
+    k = v.shape[1]
+    pd.DataFrame({"trip_id": np.repeat(t.trip_id.to_numpy(), k),
+                  "t_s": (np.arange(k)[None, :] * dt[:, None]).ravel(),
+                  "speed_kmh": 3.6 * v.ravel(),
+                  "amb_temp_c": np.repeat(t.temperature_c.to_numpy(), k)}
+                 ).to_parquet(d / "ts.parquet", index=False)
+    pd.DataFrame({"trip_id": t.trip_id, "km": t.distance_km, "v_mean": t.avg_speed_kmh,
+                  "t_amb": t.temperature_c, "e_net": t.energy_kwh}).to_csv(d / "trips.csv",
+                                                                           index=False)
+    pd.DataFrame({"trip_id": t.trip_id, "e_net": t.energy_kwh}).to_csv(d / "bare.csv",
+                                                                       index=False)
+    return d
+
+
+def test_columns_and_soc_initial(logger, tmp_path, capsys):
+    args = ["fit", str(logger / "trips.csv"), "--out", str(tmp_path / "m"), *FAST]
+    assert main(args) == 2
+    assert "measured outcome" in capsys.readouterr().err
+    cols = "km=distance_km,v_mean=avg_speed_kmh,t_amb=temperature_c,e_net=energy_kwh"
+    assert main([*args, "--columns", cols]) == 2
+    err = capsys.readouterr().err
+    assert "soc_initial" in err and "--soc-initial" in err  # says what to do
+    assert main([*args, "--columns", cols, "--soc-initial", "0.9"]) == 0
+    m = HybridModel.load(tmp_path / "m")
+    assert m.fit_info_["n_trips"] == 70
+    # the same mapping from a file
+    pd.DataFrame({"old": cols.split(",")}).old.str.split("=", expand=True).set_axis(
+        ["old", "new"], axis=1).to_csv(tmp_path / "map.csv", index=False)
+    assert main(["fit", str(logger / "trips.csv"), "--out", str(tmp_path / "m2"), *FAST,
+                 "--columns-file", str(tmp_path / "map.csv"), "--soc-initial", "0.9"]) == 0
+
+
+@pytest.mark.parametrize("spec, msg", [("e_net", "OLD=NEW"), ("nope=energy_kwh", "no column"),
+                                       ("km=trip_id", "already has"),
+                                       ("km=a,v_mean=a", "several columns")])
+def test_bad_columns_exit_2(logger, tmp_path, capsys, spec, msg):
+    assert main(["fit", str(logger / "trips.csv"), "--out", str(tmp_path / "m"), *FAST,
+                 "--columns", spec, "--soc-initial", "0.9"]) == 2
+    assert msg in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
+
+
+def test_fit_derives_summaries_from_traces(logger, tmp_path, capsys):
+    """Only trip_id and energy in the table: distance, speed and temperature from the traces."""
+    out = tmp_path / "m"
+    assert main(["fit", str(logger / "bare.csv"), "--timeseries", str(logger / "ts.parquet"),
+                 "--columns", "e_net=energy_kwh", "--soc-initial", "0.8", "--out", str(out),
+                 "--coastdown", "150", "0.3", "0.03", "1500", "--capacity-kwh", "50",
+                 *FAST]) == 0
+    m = HybridModel.load(out)
+    assert m.capacity_kwh == 50.0 and m._vehicle().mass_kg == 1500.0
+    pred = tmp_path / "p.parquet"
+    assert main(["predict", str(out), str(logger / "bare.csv"), "--timeseries",
+                 str(logger / "ts.parquet"), "--soc-initial", "0.8", "--out", str(pred)]) == 0
+    p = pd.read_parquet(pred)
+    ref = pd.read_csv(logger / "trips.csv")
+    np.testing.assert_allclose(p.distance_km, ref.km, rtol=0.02)
+    assert {"energy_kwh_lo", "energy_kwh_hi"} <= set(p.columns)
+    # the road load is fixed at fit time; the capacity may change (SoC only)
+    assert main(["range", "--soc", "0.8", "--speed", "50", "--temp", "10", "--model", str(out),
+                 "--coastdown", "179.4", "0.28", "0.0235", "1919"]) == 2
+    assert "does not match" in capsys.readouterr().err
+    assert main(["range", "--soc", "0.8", "--speed", "50", "--temp", "10", "--model", str(out),
+                 "--capacity-kwh", "100"]) == 0
+    printed = capsys.readouterr().out
+    assert "(80.0 kWh)" in printed
+    assert "beyond the longest training trip" in printed  # trained on <= 200 km trips
+
+
+def test_range_without_model_uses_coastdown(capsys):
+    base = ["range", "--soc", "0.8", "--speed", "90", "--temp", "20"]
+    assert main(base) == 0
+    paper = capsys.readouterr().out
+    assert main([*base, "--coastdown", "300", "0.5", "0.05", "2500", "--capacity-kwh",
+                 "75"]) == 0
+    heavy = capsys.readouterr().out
+    km = [float(s.split("alone:")[1].split("km")[0]) for s in (paper, heavy)]
+    assert km[1] < 0.8 * km[0]
+
+
+def test_simulate_truth_is_fit_ready(tmp_path, capsys):
+    out = tmp_path / "m.csv"
+    assert main(["simulate", "--truth", "paper", "--n-trips", "80", "--n-steps", "100",
+                 "--out", str(out), "--quiet"]) == 0
+    t = pd.read_csv(out)
+    assert {"energy_kwh", "soc_final"} <= set(t.columns)
+    assert main(["fit", str(out), "--out", str(tmp_path / "model"), *FAST]) == 0
+
+
+def test_example_data_never_overwrites(tmp_path, capsys):
+    assert main(["example-data", str(tmp_path / "ex")]) == 0
+    s = pd.read_csv(tmp_path / "ex" / "schedule.csv")
+    tariff = pd.read_csv(tmp_path / "ex" / "tariff.csv")
+    assert "mode" not in s.columns and len(s) > 10 and list(tariff.columns) == [
+        "start", "price_per_kwh"]
+    before = (tmp_path / "ex" / "schedule.csv").read_bytes()
+    assert main(["example-data", str(tmp_path / "ex")]) == 2
+    assert "never overwrites" in capsys.readouterr().err
+    assert (tmp_path / "ex" / "schedule.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("cmd", [
+    ["predict", "MODEL", "TRIPS", "--out", "p.json"],
+    ["plan-charging", "S", "--tariff", "T", "--soc-now", "0.5", "--model", "MODEL",
+     "--out", "plan.xlsx"],
+    ["fit", "TRIPS", "--out", "model.csv"],
+])
+def test_output_format_checked_before_work(tmp_path, capsys, cmd):
+    cmd = [str(tmp_path / c) if c in ("MODEL", "TRIPS", "S", "T") else c for c in cmd]
+    cmd = [str(tmp_path / c) if c.endswith((".json", ".xlsx", "model.csv")) else c
+           for c in cmd]
+    assert main(cmd) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err
+    assert list(tmp_path.iterdir()) == []

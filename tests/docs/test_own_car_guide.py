@@ -1,0 +1,113 @@
+"""The "your own car" guide (docs/own_car.md) works verbatim.
+
+Every ```bash block of the guide is run, in order, as one bash script with
+``hybridev`` on the PATH (this interpreter, this source tree):
+
+* on the real M1 trips (``../shared/realtrips``, or ``$HYBRIDEV_REALTRIPS``)
+  when present: slow (about 90 s), skipped otherwise;
+* on a small synthetic logger with the M1 logger's column names and no SoC,
+  in the default suite, with fewer epochs and members (``--max-epochs 15
+  --members 2`` appended to ``fit`` and ``calibrate``).
+
+Both check the outputs the guide promises: a saved model, predictions with
+intervals, a finite, ordered range band, a charging plan and a report.
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+GUIDE = ROOT / "docs" / "own_car.md"
+REAL = Path(os.environ.get("HYBRIDEV_REALTRIPS", ROOT.parent / "shared" / "realtrips"))
+
+
+def guide_script() -> str:
+    blocks = re.findall(r"```bash\n(.*?)```", GUIDE.read_text(), flags=re.S)
+    assert len(blocks) >= 6, "the guide lost its command blocks"
+    return "set -euo pipefail\n" + "\n".join(blocks)
+
+
+def run_guide(workdir: Path, data: Path, script: str) -> str:
+    bin_dir = workdir / "bin"
+    bin_dir.mkdir()
+    shim = bin_dir / "hybridev"
+    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
+    shim.chmod(0o755)
+    env = dict(os.environ, DATA=str(data), PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+               PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+               MPLBACKEND="Agg")
+    res = subprocess.run(["bash", "-c", script], cwd=workdir, env=env, capture_output=True,
+                         text=True, timeout=1200)
+    assert res.returncode == 0, f"guide failed:\n{res.stdout}\n{res.stderr}"
+    return res.stdout
+
+
+def check_outputs(workdir: Path, stdout: str, n_trips: int) -> None:
+    assert (workdir / "m1-model" / "model.json").exists()
+    pred = pd.read_csv(workdir / "m1-predictions.csv")
+    assert len(pred) == n_trips
+    lo, mid, hi = (pred[c].to_numpy() for c in ("energy_kwh_lo", "energy_kwh_pred",
+                                                 "energy_kwh_hi"))
+    assert np.all((lo <= mid) & (mid <= hi)) and np.all(lo >= 0)
+    band = [float(m) for m in re.findall(r"q[159]0\s+([0-9.]+|inf) km", stdout)]
+    assert len(band) == 3 and np.all(np.isfinite(band)) and band[0] <= band[1] <= band[2]
+    assert (workdir / "m1-fan.png").stat().st_size > 5_000
+    plan = pd.read_csv(workdir / "m1-plan.csv")
+    assert len(plan) == 672 and (plan.filter(like="kw").to_numpy() >= -1e-9).all()
+    summary = json.loads((workdir / "m1-report" / "summary.json").read_text())
+    assert summary["data"]["logged_traces"] is True
+    assert (workdir / "m1-model-all" / "model.json").exists()
+
+
+def synthetic_logger(folder: Path, n_trips: int = 64) -> None:
+    """Trips and 1 Hz-like traces with the M1 logger's column names and no SoC."""
+    from hybridev.physics.kinematics import synthesize_speed_trace
+    from hybridev.physics.truth import make_dataset
+
+    t = make_dataset(n_trips, truth="structured", seed=5, n_steps=200)
+    kwh_per_km = t["energy_kwh"] / t["distance_km"]  # the truth's consumption
+    kwh_per_km *= 0.14 / kwh_per_km.median()  # a small car, as the guide's 60 kWh battery
+    t["distance_km"] = np.linspace(3.5, 38.0, n_trips)  # short trips, as a commuter's logger
+    v, dt = synthesize_speed_trace(t.distance_km, t.avg_speed_kmh, list(t["mode"]),
+                                   n_steps=200, seed=11, trip_keys=t.trip_id)
+    k = v.shape[1]
+    ts = pd.DataFrame({"trip_id": np.repeat(t.trip_id.to_numpy(), k),
+                       "t_s": (np.arange(k)[None, :] * dt[:, None]).ravel(),
+                       "speed_kmh": 3.6 * v.ravel(),
+                       "amb_temp_c": np.repeat(t.temperature_c.to_numpy(), k)})
+    trips = pd.DataFrame({
+        "trip_id": t.trip_id, "session_group": np.arange(n_trips) // 3,
+        "date": "2023-04-01", "distance_km": t.distance_km,
+        "mean_speed_kmh": t.avg_speed_kmh, "amb_temp_mean_c": t.temperature_c,
+        "e_batt_net_kwh": (kwh_per_km * t.distance_km).round(3)})
+    folder.mkdir()
+    trips.to_csv(folder / "trips.csv", index=False)
+    ts.to_parquet(folder / "timeseries_1hz.parquet", index=False)
+
+
+def test_guide_is_linked_from_readme():
+    assert "docs/own_car.md" in (ROOT / "README.md").read_text()
+
+
+def test_guide_on_synthetic_logger(tmp_path):
+    synthetic_logger(tmp_path / "logger")
+    script = re.sub(r"^(hybridev (?:fit|calibrate) .*)$", r"\1 --max-epochs 15 --members 2",
+                    guide_script(), flags=re.M)
+    assert script.count("--max-epochs 15") == 2
+    out = run_guide(tmp_path, tmp_path / "logger", script)
+    check_outputs(tmp_path, out, 64)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (REAL / "trips.csv").exists(), reason=f"real trips not found at {REAL}")
+def test_guide_on_real_trips(tmp_path):
+    out = run_guide(tmp_path, REAL, guide_script())
+    check_outputs(tmp_path, out, len(pd.read_csv(REAL / "trips.csv")))
