@@ -51,10 +51,14 @@ def _vehicle(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.report.build import calibration_report
+    from hybridev.apps.report.html import legacy_report
+    from hybridev.core.outputs import check_output
     from hybridev.data.logs import read_measured_trips
 
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
+    check_output(args.out, kind="dir", inputs=[args.measured, args.timeseries],
+                 legacy=legacy_report)  # before the work
     vehicle = _vehicle(args)
     measured = read_measured_trips(args.measured, args.timeseries, vehicle)
     n_bad = measured.n_rejected

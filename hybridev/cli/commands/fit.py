@@ -52,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.core.progress import progress_bar
     from hybridev.data.measured import validate_measured_trips
     from hybridev.learning.model import HybridModel
+    from hybridev.learning.persist import check_model_path
 
+    check_model_path(args.out, option="--out", inputs=[args.measured])  # before the work
     table = read_table(args.measured)
     if args.skip_bad_rows:
         table, rejected = validate_measured_trips(table, on_error="collect")

@@ -40,7 +40,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.charging.plan import plan_charging
     from hybridev.core.fileio import read_table, write_table
+    from hybridev.core.outputs import TABLE_SUFFIXES, check_output
 
+    inputs = [args.schedule, args.tariff, args.model]
+    check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=inputs)
+    if args.trips_out:
+        check_output(args.trips_out, option="--trips-out", suffixes=TABLE_SUFFIXES,
+                     inputs=[*inputs, args.out])
     schedule = read_table(args.schedule)
     tariff = read_table(args.tariff)
     if args.model is None:
@@ -58,6 +64,6 @@ def run(args: argparse.Namespace) -> int:
     write_table(result.plan, args.out)
     print(f"wrote {len(result.plan)} slots to {args.out}")
     if args.trips_out:
-        write_table(result.trips, args.trips_out)
+        write_table(result.trips, args.trips_out, option="--trips-out")
         print(f"wrote {len(result.trips)} trips to {args.trips_out}")
     return 0

@@ -40,10 +40,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.core.fileio import read_table, write_table
+    from hybridev.core.outputs import TABLE_SUFFIXES, check_output
     from hybridev.learning.model import HybridModel
 
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
+    check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=[args.model, args.trips])
     model = HybridModel.load(args.model)
     trips = read_table(args.trips)
     calibrated = getattr(model, "conformal_", None) is not None

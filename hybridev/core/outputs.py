@@ -1,0 +1,492 @@
+"""Safe outputs: every file or folder hybridev writes goes through this module.
+
+The rules (also in the README, section "Safety"):
+
+* **Check before the work.** :func:`check_output` is called by every command
+  and public writer *before* any computation. A bad path raises a
+  :class:`ValueError` naming the option (``--out``, ``--plot``, ...): a
+  missing or non-folder parent that cannot be created, no write permission,
+  a wrong extension for the format, a path that is also an input (or inside
+  an input folder, or a folder holding an input), a file path that is a
+  folder, a folder path that is a file.
+* **Atomic.** Everything is written into a temporary name in the same folder
+  and moved into place with :func:`os.replace` only when complete; on any
+  error, and on SIGINT/SIGTERM, the temporary files are removed and any
+  previous output is left as it was.
+* **Never destroy what we did not write.** A *file* output replaces an
+  existing regular file of that name (the user named it), never a folder or
+  an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
+  model, a report) replaces an existing folder only if it is empty or carries
+  this package's marker :data:`MANIFEST_FILE` listing every file in it (a
+  folder hybridev wrote, and nothing added since). A *merged* folder
+  (``kind="merge_dir"``, ``hybridev demo``) keeps the files the user put
+  there and replaces only the entries hybridev wrote there before.
+
+API
+---
+``check_output(path, option=..., kind="file"|"model_dir"|"dir"|"merge_dir",
+suffixes=..., inputs=[...], names=[...]) -> Path``
+    Validate an output path before the work.
+``atomic_file(path, option=...)``
+    Context manager yielding a temporary path; moved to ``path`` on success.
+``write_table(df, path, option=...)``, ``write_text(text, path, option=...)``,
+``save_figure(fig, path, option=...)``
+    One-call atomic writers (a failed write raises ``ValueError`` naming the option).
+``output_dir(path, option=..., kind=..., manifest=None)``
+    Context manager yielding a temporary folder; on success a manifest with
+    the SHA-256 of every file is added and the folder moved into place.
+``read_manifest(folder)``, ``is_hybridev_dir(folder)``
+    Inspect a folder's marker.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import itertools
+import json
+import os
+import shutil
+import signal
+import tempfile
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+__all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "TABLE_SUFFIXES", "atomic_file",
+           "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
+           "sha256_file", "write_table", "write_text"]
+
+MANIFEST_FILE = "hybridev-manifest.json"
+"""Marker of a folder written by hybridev: ``written_by``, ``kind`` and the
+SHA-256 of every file in it (``files``: relative path -> hex digest)."""
+TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+_KINDS = ("file", "model_dir", "dir", "merge_dir")
+
+
+# -- temporary paths cleaned on error and on SIGINT/SIGTERM ---------------------------------
+_PENDING: dict[int, Callable[[], None]] = {}
+_PREVIOUS: dict[int, object] = {}
+_LOCK = threading.RLock()
+_COUNTER = itertools.count()
+_SIGNALS = tuple(s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGINT", None))
+                 if s is not None)
+
+
+def _cleanup_all() -> None:
+    with _LOCK:
+        actions = list(_PENDING.values())[::-1]
+        _PENDING.clear()
+    for act in actions:
+        with contextlib.suppress(Exception):
+            act()
+
+
+def _on_signal(signum, frame) -> None:
+    _cleanup_all()
+    prev = _PREVIOUS.pop(signum, signal.SIG_DFL)
+    with contextlib.suppress(ValueError, TypeError):
+        signal.signal(signum, prev)
+    if callable(prev):
+        prev(signum, frame)  # e.g. KeyboardInterrupt for SIGINT
+    else:
+        os.kill(os.getpid(), signum)  # the default action, with the usual exit status
+
+
+def _install() -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in _SIGNALS:
+        if s in _PREVIOUS:
+            continue
+        cur = signal.getsignal(s)
+        if cur in (signal.SIG_IGN, None) or cur is _on_signal:
+            continue
+        with contextlib.suppress(ValueError, OSError):
+            signal.signal(s, _on_signal)
+            _PREVIOUS[s] = cur
+
+
+def _uninstall() -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s, prev in list(_PREVIOUS.items()):
+        if signal.getsignal(s) is _on_signal:
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(s, prev)
+        _PREVIOUS.pop(s, None)
+
+
+@contextlib.contextmanager
+def _guard(cleanup: Callable[[], None]) -> Iterator[None]:
+    """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends."""
+    key = next(_COUNTER)
+    with _LOCK:
+        _PENDING[key] = cleanup
+        _install()
+    try:
+        yield
+    finally:
+        with _LOCK:
+            act = _PENDING.pop(key, None)
+            if not _PENDING:
+                _uninstall()
+        if act is not None:
+            with contextlib.suppress(Exception):
+                act()
+
+
+def _rm(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    elif os.path.lexists(p):
+        with contextlib.suppress(OSError):
+            os.unlink(p)
+
+
+# -- manifests --------------------------------------------------------------------------------
+def sha256_file(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_manifest(folder: str | os.PathLike) -> dict | None:
+    """The folder's :data:`MANIFEST_FILE` as a dict, or None when absent or unreadable."""
+    p = Path(folder) / MANIFEST_FILE
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    if (not isinstance(doc, dict) or doc.get("written_by") != "hybridev"
+            or not isinstance(doc.get("files"), dict)):
+        return None
+    return doc
+
+
+def _entries(folder: Path) -> list[str]:
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*")
+                  if not p.is_dir() or p.is_symlink())
+
+
+def _foreign(folder: Path, legacy: Callable[[Path], bool] | None = None) -> list[str]:
+    """Files in ``folder`` that hybridev did not write there (empty: safe to replace)."""
+    files = [f for f in _entries(folder) if f != MANIFEST_FILE]
+    if not files:
+        return []
+    doc = read_manifest(folder)
+    if doc is None:
+        return [] if legacy is not None and legacy(folder) else files
+    return [f for f in files if f not in doc["files"]]
+
+
+def is_hybridev_dir(folder: str | os.PathLike) -> bool:
+    """True when ``folder`` carries a manifest listing every file in it."""
+    folder = Path(folder)
+    return folder.is_dir() and read_manifest(folder) is not None and not _foreign(folder)
+
+
+def _write_manifest(folder: Path, info: dict, keep: dict | None = None) -> None:
+    files = dict(keep or {})
+    for rel in _entries(folder):
+        if rel != MANIFEST_FILE:
+            files[rel] = sha256_file(folder / rel)
+    doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
+    (folder / MANIFEST_FILE).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+
+
+# -- checks -----------------------------------------------------------------------------------
+def _resolve(p: str | os.PathLike) -> Path:
+    return Path(os.path.abspath(os.path.expanduser(os.fspath(p))))
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    try:
+        child.relative_to(parent)
+    except ValueError:
+        return False
+    return True
+
+
+def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = "file",
+                 suffixes: Iterable[str] | None = None,
+                 inputs: Iterable[str | os.PathLike | None] = (),
+                 names: Iterable[str] = (),
+                 legacy: Callable[[Path], bool] | None = None) -> Path:
+    """Check an output path before any work; return it as an absolute :class:`~pathlib.Path`.
+
+    Parameters
+    ----------
+    path : path-like
+        The output file or folder.
+    option : str
+        Name shown in the error (``"--out"``, ``"--plot"``, ``"path"``).
+    kind : {"file", "model_dir", "dir", "merge_dir"}
+        ``file``: a single file (an existing regular file is replaced).
+        ``model_dir``/``dir``: a folder replaced as a whole, allowed only when
+        absent, empty or written by hybridev (:data:`MANIFEST_FILE`).
+        ``merge_dir``: a folder into which the entries ``names`` are written;
+        other files in it are kept, and each of ``names`` that exists must have
+        been written there by hybridev.
+    suffixes : iterable of str, optional
+        Allowed extensions of a file (case-insensitive).
+    inputs : iterable of path-like
+        Input files or folders of the same run; the output may not be one of
+        them, lie inside one, or (for folders) hold one.
+    names : iterable of str
+        For ``merge_dir``: the top-level entries that will be written.
+    legacy : callable, optional
+        ``legacy(folder) -> bool``: recognises a folder written by an older
+        hybridev without a manifest (e.g. a model of format version 1).
+
+    Raises
+    ------
+    ValueError
+        Naming ``option``, the path and the reason.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> check_output(d / "p.csv", suffixes=TABLE_SUFFIXES).name
+    'p.csv'
+    >>> check_output(d / "p.xlsx", suffixes=TABLE_SUFFIXES)
+    Traceback (most recent call last):
+    ...
+    ValueError: --out=... must end in one of ['.csv', '.parquet', '.pq']; got '.xlsx'
+    """
+    if kind not in _KINDS:
+        raise ValueError(f"kind={kind!r}; allowed: {list(_KINDS)}")
+    raw = os.fspath(path) if isinstance(path, str | os.PathLike) else path
+    if not isinstance(raw, str) or raw.strip() == "":
+        raise ValueError(f"{option}={path!r} must be a non-empty path")
+    if "\0" in raw:
+        raise ValueError(f"{option}={raw!r} contains a NUL character")
+    p = _resolve(raw)
+    what = f"{option}={raw!r}"
+    rp = Path(os.path.realpath(p))
+    for inp in inputs:
+        if inp is None:
+            continue
+        q = Path(os.path.realpath(_resolve(inp)))
+        same = q == rp or (q.exists() and p.exists() and os.path.samefile(q, p))
+        if same:
+            raise ValueError(f"{what} is also an input of this run; hybridev never writes "
+                             "over its input: choose another path")
+        if kind != "file" and _inside(q, rp):
+            raise ValueError(f"{what} holds the input {str(inp)!r}; choose another path")
+        if q.is_dir() and _inside(rp, q):
+            raise ValueError(f"{what} lies inside the input folder {str(inp)!r}; choose "
+                             "another path")
+    if kind == "file":
+        if raw.endswith(("/", os.sep)) or p.is_dir():
+            raise ValueError(f"{what} is a directory; give a file name")
+        if suffixes is not None:
+            allowed = [s.lower() for s in suffixes]
+            if p.suffix.lower() not in allowed:
+                raise ValueError(f"{what} must end in one of {allowed}; got "
+                                 f"{p.suffix or 'no extension'!r}")
+        if os.path.lexists(p) and not p.is_file():
+            raise ValueError(f"{what} exists and is not a regular file")
+    else:
+        if os.path.lexists(p) and not p.is_dir():
+            raise ValueError(f"{what} exists and is not a folder; hybridev never replaces a "
+                             "file with a folder: choose another path")
+        if p.is_dir() and p.is_symlink():
+            raise ValueError(f"{what} is a symbolic link; give the real folder")
+        if p.is_dir() and kind in ("model_dir", "dir"):
+            bad = _foreign(p, legacy)
+            if bad:
+                raise ValueError(
+                    f"{what} is an existing folder with files hybridev did not write there "
+                    f"(e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
+                    "give a new folder name")
+        if p.is_dir() and kind == "merge_dir":
+            doc = read_manifest(p)
+            old = doc is None and legacy is not None and legacy(p)
+            listed = set(names) if old else set((doc or {"files": {}})["files"])
+            for name in names:
+                q = p / name
+                if not os.path.lexists(q):
+                    continue
+                ours = name in listed and (not q.is_dir() or old or not _foreign(q))
+                if not ours:
+                    raise ValueError(f"{what}: {str(q)!r} exists and was not written there by "
+                                     "hybridev; move it away or choose another folder")
+    anc = p.parent
+    while not os.path.lexists(anc) and anc != anc.parent:
+        anc = anc.parent
+    if not anc.is_dir():
+        raise ValueError(f"{what} is not writable: {str(anc)!r} is not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise ValueError(f"{what} is not writable: no write permission in {str(anc)!r}")
+    return p
+
+
+def _could_not(option: str, path, exc: BaseException) -> ValueError:
+    return ValueError(f"{option}={os.fspath(path)!r} could not be written: {exc}")
+
+
+# -- writers ----------------------------------------------------------------------------------
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[Path]:
+    """Yield a temporary file path in the target's folder; moved to ``path`` on success.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> with atomic_file(d / "a.txt") as tmp:
+    ...     _ = tmp.write_text("hi")
+    >>> (d / "a.txt").read_text(), sorted(p.name for p in d.iterdir())
+    ('hi', ['a.txt'])
+    """
+    path = _resolve(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        os.chmod(tmp, 0o644)  # mkstemp makes it private; the result is an ordinary file
+    except OSError as exc:
+        raise _could_not(option, path, exc) from exc
+    tmp = Path(tmp)
+    with _guard(lambda: _rm(tmp)):
+        try:
+            yield tmp
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+
+
+def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
+    """Write a DataFrame as CSV or Parquet (by suffix), atomically."""
+    with atomic_file(path, option=option) as tmp:
+        if Path(path).suffix.lower() in (".parquet", ".pq"):
+            df.to_parquet(tmp, index=False)
+        else:
+            df.to_csv(tmp, index=False)
+
+
+def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:
+    """Write UTF-8 text (JSON, HTML, Markdown), atomically."""
+    with atomic_file(path, option=option) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def save_figure(fig, path: str | os.PathLike, *, option: str = "--plot", **kwargs) -> None:
+    """Save a matplotlib figure atomically, in the format given by the suffix."""
+    fmt = Path(path).suffix.lower().lstrip(".") or None
+    with atomic_file(path, option=option) as tmp:
+        fig.savefig(tmp, format=fmt, **kwargs)
+
+
+@contextlib.contextmanager
+def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "dir",
+               manifest: dict | None = None, inputs: Iterable = (),
+               legacy: Callable[[Path], bool] | None = None) -> Iterator[Path]:
+    """Yield a temporary folder that becomes ``path`` on success, with a manifest.
+
+    ``kind="model_dir"`` or ``"dir"``: ``path`` is replaced as a whole (allowed
+    only as :func:`check_output` says). ``kind="merge_dir"``: each top-level
+    entry of the temporary folder replaces the entry of that name in ``path``
+    (checked the same way); other files in ``path`` are kept. ``manifest``:
+    extra fields of :data:`MANIFEST_FILE` (e.g. a format version).
+
+    The check is repeated at the start, so a direct caller is protected too.
+    On error or SIGINT/SIGTERM nothing is left behind and ``path`` is unchanged
+    (a signal in the middle of the final swap restores the previous folder).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> with output_dir(d / "m", kind="model_dir") as tmp:
+    ...     _ = (tmp / "x.txt").write_text("1")
+    >>> sorted(p.name for p in (d / "m").iterdir())
+    ['hybridev-manifest.json', 'x.txt']
+    """
+    info = {"kind": kind, **(manifest or {})}
+    if kind == "merge_dir":
+        target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
+        yield from _merge(target, option, info, legacy)
+        return
+    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp",
+                                    dir=target.parent))
+        tmp.chmod(0o755)
+    except OSError as exc:
+        raise _could_not(option, path, exc) from exc
+    old = target.with_name(f".{target.name}.{os.getpid()}.old")
+    state = {"moved_old": False}
+
+    def cleanup() -> None:
+        if state["moved_old"] and not os.path.lexists(target) and old.exists():
+            os.replace(old, target)  # interrupted mid-swap: put the previous folder back
+        elif state["moved_old"]:
+            _rm(old)
+        _rm(tmp)
+
+    with _guard(cleanup):
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+        try:
+            _write_manifest(tmp, info)
+            check_output(target, option=option, kind=kind, legacy=legacy)  # still replaceable
+            if target.exists():
+                _rm(old)
+                os.replace(target, old)
+                state["moved_old"] = True
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+
+
+def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
+    created = not os.path.lexists(target)
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".hybridev.", suffix=".tmp", dir=target))
+        tmp.chmod(0o755)
+    except OSError as exc:
+        raise _could_not(option, target, exc) from exc
+
+    def cleanup() -> None:
+        _rm(tmp)
+        if created and not (target / MANIFEST_FILE).exists():
+            with contextlib.suppress(OSError):
+                target.rmdir()  # only if still empty
+
+    with _guard(cleanup):
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _could_not(option, target, exc) from exc
+        names = sorted(p.name for p in tmp.iterdir())
+        check_output(target, option=option, kind="merge_dir", names=names, legacy=legacy)
+        old_doc = read_manifest(target) or {"files": {}}
+        try:
+            for name in names:
+                src, dst = tmp / name, target / name
+                if src.is_dir():
+                    if dst.exists():
+                        _rm(dst)
+                    os.replace(src, dst)
+                else:
+                    os.replace(src, dst)
+            keep = {k: v for k, v in old_doc["files"].items() if os.path.lexists(target / k)}
+            files = dict(keep)
+            for name in names:
+                files[name] = "folder" if (target / name).is_dir() else sha256_file(target / name)
+            doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
+            with atomic_file(target / MANIFEST_FILE, option=option) as mtmp:
+                mtmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        except OSError as exc:
+            raise _could_not(option, target, exc) from exc
