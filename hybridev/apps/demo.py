@@ -30,6 +30,7 @@ from hybridev.apps.charging.plan import plan_charging
 from hybridev.apps.range import predict_range
 from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 from hybridev.apps.report.build import calibration_report
+from hybridev.core.checks import check_seed
 from hybridev.core.outputs import check_output, output_dir
 from hybridev.learning.model import HybridModel
 from hybridev.metrics import coverage, mape, mean_width
@@ -226,6 +227,7 @@ def run_demo(out_dir: str | os.PathLike = "results", *, seed: int = 0, n_trips: 
         The summary also written to ``summary.json``.
     """
     done = stage or (lambda _name: None)
+    check_seed(seed)
     check_output(out_dir, option=option, kind="merge_dir", names=DEMO_OUTPUTS,
                  legacy=_legacy_demo)  # before the work
     t0 = time.perf_counter()

@@ -44,6 +44,7 @@ import pandas as pd
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import DEFAULT_PARAMS, PhysicsPrior
+from hybridev.core.checks import check_seed
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 from hybridev.data.measured import validate_measured_trips
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
@@ -149,6 +150,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     >>> post.samples.shape[1], bool(post.summary().loc["aux_base_kw", "q05"] < 0.5)
     (1, True)
     """
+    check_seed(seed)
     veh = vehicle or VehicleParams()
     pr = prior or PhysicsPrior()
     names = tuple(params)
@@ -285,6 +287,7 @@ def simulate_measured(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     from hybridev.physics.trips import _blocks
     from hybridev.physics.validation import validate_trips
     t = validate_trips(trips)
+    check_seed(seed)
     tp = dict(true_params or {})
     veh = vehicle_with(vehicle or VehicleParams(), tp)
     s = float(tp.get("regen_scale", 1.0))

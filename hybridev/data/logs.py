@@ -165,6 +165,12 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
     (1.2, 72.0)
     """
     veh = vehicle or VehicleParams()
+    if isinstance(trips, pd.DataFrame) and len(trips) == 0:
+        raise ValueError(f"measured trips: the table has no rows (columns "
+                         f"{list(trips.columns)[:8]}); at least one trip is required")
+    if isinstance(timeseries, pd.DataFrame) and len(timeseries) == 0:
+        raise ValueError("timeseries: the table has no rows; give logged samples or leave "
+                         "the time series out")
     traces, ts_rej = None, pd.DataFrame(columns=REJECTED_COLUMNS)
     table, mismatch = trips, []
     if timeseries is not None:
@@ -193,8 +199,8 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
                     "reason": [why.format(v=v) for v in tid[mask].tolist()]}))
         table = table.loc[~(dup | bad_ts | off)]
         if len(table) == 0:
-            raise ValueError("measured trips: all rows were rejected; first reason: "
-                             f"{extra[0]['reason'].iloc[0]}")
+            first = extra[0]["reason"].iloc[0] if extra else "none given"
+            raise ValueError(f"measured trips: all rows were rejected; first reason: {first}")
     good, rej = validate_measured_trips(table, veh, on_error="collect")
     if len(rej):
         rej = rej.assign(source="trips", trip_id=(
