@@ -161,7 +161,7 @@ def test_failed_run_leaves_no_partial_directory(run, tmp_path, monkeypatch):
     mine = tmp_path / "mine"  # a folder of the user's: refused before the work
     mine.mkdir()
     (mine / "report.html").write_text("my notes")
-    with pytest.raises(ValueError, match="out_dir=.*did not write there.*report.html"):
+    with pytest.raises(ValueError, match=r"out_dir=.*did not write there.*report\.html"):
         R.calibration_report(run["measured"], out_dir=mine, **FAST)
     assert (mine / "report.html").read_text() == "my notes"
 
