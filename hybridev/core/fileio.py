@@ -65,7 +65,8 @@ def read_table(path: str | os.PathLike, *, option: str | None = None) -> pd.Data
     except pd.errors.EmptyDataError as exc:
         raise ValueError(f"{what} is empty (no header row)") from exc
     except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:
-        raise ValueError(f"could not read {str(path)!r} as a table: {exc}") from exc
+        msg = " ".join(str(exc).split())  # one line
+        raise ValueError(f"could not read {str(path)!r} as a table: {msg}") from exc
     except Exception as exc:  # pyarrow raises its own errors for a damaged file
         raise ValueError(f"could not read {str(path)!r} as a table: "
                          f"{type(exc).__name__}: {exc}") from exc

@@ -299,6 +299,13 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
         if p.is_dir() and p.is_symlink():
             raise ValueError(f"{what} is a symbolic link; give the real folder")
         if p.is_dir() and kind in ("model_dir", "dir"):
+            doc = read_manifest(p) or {}
+            other = doc.get("kind", kind)
+            if other != kind:
+                what_is = ("a saved model" if other == "model_dir"
+                           else f"a hybridev {doc.get('content', 'output')} folder")
+                raise ValueError(f"{what} holds {what_is}, not this kind of output; "
+                                 "hybridev refuses to replace it: give a new folder name")
             bad = _foreign(p, legacy)
             if bad:
                 raise ValueError(
