@@ -123,7 +123,7 @@ def test_crafted_config_cannot_allocate_a_huge_network(fuzz_files, tmp_path):
     doc["config"]["n_members"] = 100
     (dst / DOC_FILE).write_text(json.dumps(doc))
     _resign(dst)
-    with pytest.raises(ValueError, match="needs [0-9]+ network weights"):
+    with pytest.raises(ValueError, match=r"needs [0-9]+ network weights"):
         HybridModel.load(dst)
 
 
@@ -148,7 +148,7 @@ def test_save_never_replaces_a_user_folder_or_file(fuzz_files, tmp_path):
     user = tmp_path / "data"
     user.mkdir()
     (user / "trips.csv").write_text("mine\n")
-    with pytest.raises(ValueError, match="path=.*did not write there"):
+    with pytest.raises(ValueError, match=r"path=.*did not write there"):
         m.save(user)
     with pytest.raises(ValueError, match="never replaces a file with a folder"):
         m.save(user / "trips.csv")
