@@ -118,7 +118,7 @@ def make_case(rng):
 
 def run_case(pool_dir, work, case, monkeypatch):
     rng = np.random.default_rng(case)
-    argv, kind = make_case(rng)
+    argv, _ = make_case(rng)
     if work.exists():
         shutil.rmtree(work)
     shutil.copytree(pool_dir, work)
