@@ -150,7 +150,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     >>> post.samples.shape[1], bool(post.summary().loc["aux_base_kw", "q05"] < 0.5)
     (1, True)
     """
-    check_seed(seed)
+    seed = check_seed(seed)
     veh = vehicle or VehicleParams()
     pr = prior or PhysicsPrior()
     names = tuple(params)
@@ -221,7 +221,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     else:
         p0[bad] = theta + 1e-6 * scale * rng.standard_normal((int(bad.sum()), ndim))
     sampler = emcee.EnsembleSampler(n_walkers, ndim, logpost, vectorize=True, moves=_moves())
-    sampler.random_state = np.random.RandomState(seed).get_state()
+    legacy_seed = seed if seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
+    sampler.random_state = np.random.RandomState(legacy_seed).get_state()  # 32-bit seeds only
     state = p0
     if n_steps is not None:
         sampler.run_mcmc(state, int(n_steps), progress=progress)

@@ -42,161 +42,29 @@ suffixes=..., inputs=[...], names=[...]) -> Path``
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import itertools
 import json
 import os
-import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+
+from hybridev.core.cleanup import guard, remove_path
+from hybridev.core.manifest import (
+    MANIFEST_FILE,
+    foreign_files,
+    is_hybridev_dir,
+    read_manifest,
+    sha256_file,
+    write_manifest,
+)
 
 __all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "TABLE_SUFFIXES", "atomic_file",
            "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
            "sha256_file", "write_table", "write_text"]
 
-MANIFEST_FILE = "hybridev-manifest.json"
-"""Marker of a folder written by hybridev: ``written_by``, ``kind`` and the
-SHA-256 of every file in it (``files``: relative path -> hex digest)."""
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 _KINDS = ("file", "model_dir", "dir", "merge_dir")
-
-
-# -- temporary paths cleaned on error and on SIGINT/SIGTERM ---------------------------------
-_PENDING: dict[int, Callable[[], None]] = {}
-_PREVIOUS: dict[int, object] = {}
-_LOCK = threading.RLock()
-_COUNTER = itertools.count()
-_SIGNALS = tuple(s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGINT", None))
-                 if s is not None)
-
-
-def _cleanup_all() -> None:
-    with _LOCK:
-        actions = list(_PENDING.values())[::-1]
-        _PENDING.clear()
-    for act in actions:
-        with contextlib.suppress(Exception):
-            act()
-
-
-def _on_signal(signum, frame) -> None:
-    _cleanup_all()
-    prev = _PREVIOUS.pop(signum, signal.SIG_DFL)
-    with contextlib.suppress(ValueError, TypeError):
-        signal.signal(signum, prev)
-    if callable(prev):
-        prev(signum, frame)  # e.g. KeyboardInterrupt for SIGINT
-    else:
-        os.kill(os.getpid(), signum)  # the default action, with the usual exit status
-
-
-def _install() -> None:
-    if threading.current_thread() is not threading.main_thread():
-        return
-    for s in _SIGNALS:
-        if s in _PREVIOUS:
-            continue
-        cur = signal.getsignal(s)
-        if cur in (signal.SIG_IGN, None) or cur is _on_signal:
-            continue
-        with contextlib.suppress(ValueError, OSError):
-            signal.signal(s, _on_signal)
-            _PREVIOUS[s] = cur
-
-
-def _uninstall() -> None:
-    if threading.current_thread() is not threading.main_thread():
-        return
-    for s, prev in list(_PREVIOUS.items()):
-        if signal.getsignal(s) is _on_signal:
-            with contextlib.suppress(ValueError, OSError):
-                signal.signal(s, prev)
-        _PREVIOUS.pop(s, None)
-
-
-@contextlib.contextmanager
-def _guard(cleanup: Callable[[], None]) -> Iterator[None]:
-    """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends."""
-    key = next(_COUNTER)
-    with _LOCK:
-        _PENDING[key] = cleanup
-        _install()
-    try:
-        yield
-    finally:
-        with _LOCK:
-            act = _PENDING.pop(key, None)
-            if not _PENDING:
-                _uninstall()
-        if act is not None:
-            with contextlib.suppress(Exception):
-                act()
-
-
-def _rm(p: Path) -> None:
-    if p.is_dir() and not p.is_symlink():
-        shutil.rmtree(p, ignore_errors=True)
-    elif os.path.lexists(p):
-        with contextlib.suppress(OSError):
-            os.unlink(p)
-
-
-# -- manifests --------------------------------------------------------------------------------
-def sha256_file(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def read_manifest(folder: str | os.PathLike) -> dict | None:
-    """The folder's :data:`MANIFEST_FILE` as a dict, or None when absent or unreadable."""
-    p = Path(folder) / MANIFEST_FILE
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return None
-    if (not isinstance(doc, dict) or doc.get("written_by") != "hybridev"
-            or not isinstance(doc.get("files"), dict)):
-        return None
-    return doc
-
-
-def _entries(folder: Path) -> list[str]:
-    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*")
-                  if not p.is_dir() or p.is_symlink())
-
-
-def _foreign(folder: Path, legacy: Callable[[Path], bool] | None = None) -> list[str]:
-    """Files in ``folder`` that hybridev did not write there (empty: safe to replace)."""
-    files = [f for f in _entries(folder) if f != MANIFEST_FILE]
-    if not files:
-        return []
-    doc = read_manifest(folder)
-    if doc is None:
-        return [] if legacy is not None and legacy(folder) else files
-    return [f for f in files if f not in doc["files"]]
-
-
-def is_hybridev_dir(folder: str | os.PathLike) -> bool:
-    """True when ``folder`` carries a manifest listing every file in it."""
-    folder = Path(folder)
-    return folder.is_dir() and read_manifest(folder) is not None and not _foreign(folder)
-
-
-def _write_manifest(folder: Path, info: dict, keep: dict | None = None) -> None:
-    files = dict(keep or {})
-    for rel in _entries(folder):
-        if rel != MANIFEST_FILE:
-            files[rel] = sha256_file(folder / rel)
-    doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
-    (folder / MANIFEST_FILE).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 
 # -- checks -----------------------------------------------------------------------------------
@@ -306,7 +174,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
                            else f"a hybridev {doc.get('content', 'output')} folder")
                 raise ValueError(f"{what} holds {what_is}, not this kind of output; "
                                  "hybridev refuses to replace it: give a new folder name")
-            bad = _foreign(p, legacy)
+            bad = foreign_files(p, legacy)
             if bad:
                 raise ValueError(
                     f"{what} is an existing folder with files hybridev did not write there "
@@ -320,7 +188,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
                 q = p / name
                 if not os.path.lexists(q):
                     continue
-                ours = name in listed and (not q.is_dir() or old or not _foreign(q))
+                ours = name in listed and (not q.is_dir() or old or not foreign_files(q))
                 if not ours:
                     raise ValueError(f"{what}: {str(q)!r} exists and was not written there by "
                                      "hybridev; move it away or choose another folder")
@@ -361,7 +229,7 @@ def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[P
     except OSError as exc:
         raise _could_not(option, path, exc) from exc
     tmp = Path(tmp)
-    with _guard(lambda: _rm(tmp)):
+    with guard(lambda: remove_path(tmp)):
         try:
             yield tmp
             os.replace(tmp, path)
@@ -436,19 +304,19 @@ def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "d
         if state["moved_old"] and not os.path.lexists(target) and old.exists():
             os.replace(old, target)  # interrupted mid-swap: put the previous folder back
         elif state["moved_old"]:
-            _rm(old)
-        _rm(tmp)
+            remove_path(old)
+        remove_path(tmp)
 
-    with _guard(cleanup):
+    with guard(cleanup):
         try:
             yield tmp
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
         try:
-            _write_manifest(tmp, info)
+            write_manifest(tmp, info)
             check_output(target, option=option, kind=kind, legacy=legacy)  # still replaceable
             if target.exists():
-                _rm(old)
+                remove_path(old)
                 os.replace(target, old)
                 state["moved_old"] = True
             os.replace(tmp, target)
@@ -466,12 +334,12 @@ def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
         raise _could_not(option, target, exc) from exc
 
     def cleanup() -> None:
-        _rm(tmp)
+        remove_path(tmp)
         if created and not (target / MANIFEST_FILE).exists():
             with contextlib.suppress(OSError):
                 target.rmdir()  # only if still empty
 
-    with _guard(cleanup):
+    with guard(cleanup):
         try:
             yield tmp
         except OSError as exc:
@@ -484,7 +352,7 @@ def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
                 src, dst = tmp / name, target / name
                 if src.is_dir():
                     if dst.exists():
-                        _rm(dst)
+                        remove_path(dst)
                     os.replace(src, dst)
                 else:
                     os.replace(src, dst)

@@ -63,6 +63,7 @@ from hybridev.learning.inputs import _check_range, validate_prediction_trips
 from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
 from hybridev.learning.predictive import soc_from_energy
+from hybridev.learning.refit import RefitGuardMixin
 from hybridev.learning.uncertainty import ProbabilisticMixin
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
@@ -92,14 +93,7 @@ _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
 
 
-def _same_param(a, b) -> bool:
-    try:
-        return bool(a == b) if not isinstance(a, np.ndarray) else bool(np.array_equal(a, b))
-    except (TypeError, ValueError):
-        return a is b
-
-
-class HybridModel(ProbabilisticMixin, BaseEstimator):
+class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     """Hybrid physics + residual-network predictor of trip energy and final SoC.
 
     Parameters
@@ -297,36 +291,6 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
 
     def __sklearn_is_fitted__(self) -> bool:
         return hasattr(self, "net_")
-
-    def set_params(self, **params) -> HybridModel:
-        """Set parameters (sklearn); a fitted model refuses changes (refit required).
-
-        The network, posterior and calibration of a fitted model were learned
-        with its parameters (the vehicle above all), so changing one afterwards
-        would mix two models. Setting a parameter to its current value is
-        allowed; otherwise use ``sklearn.base.clone(model).set_params(...)`` and
-        fit again.
-
-        Raises
-        ------
-        ValueError
-            Naming the parameter, when the model is fitted and the value changes.
-
-        Examples
-        --------
-        >>> HybridModel().set_params(n_members=3).n_members
-        3
-        """
-        if hasattr(self, "net_"):
-            current = self.get_params(deep=False)
-            changed = [k for k, v in params.items()
-                       if k in current and not _same_param(current[k], v)]
-            if changed:
-                raise ValueError(
-                    f"{type(self).__name__}.set_params({changed[0]}=...) on a fitted model: "
-                    "its network, posterior and calibration were learned with the old value; "
-                    "refit required: use sklearn.base.clone(model).set_params(...) and fit")
-        return super().set_params(**params)
 
     def _require_fitted(self) -> None:
         if not hasattr(self, "net_"):

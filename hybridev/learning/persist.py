@@ -40,11 +40,11 @@ import dataclasses
 import json
 import math
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from hybridev.core.npz import read_npz
 from hybridev.core.outputs import (
     MANIFEST_FILE,
     check_output,
@@ -198,54 +198,6 @@ def _verify_manifest(path: Path, doc: dict, format_name: str, format_version: in
                              "(corrupted, truncated or edited)")
 
 
-def _load_npz(arr_path: Path) -> dict[str, np.ndarray]:
-    """Read an ``.npz`` after checking member count, headers and sizes (no pickle)."""
-    file_bytes = arr_path.stat().st_size
-    budget = min(MAX_ARRAY_BYTES, 64 * file_bytes + (16 << 20))
-    where = str(arr_path)
-    try:
-        with zipfile.ZipFile(arr_path) as zf:
-            infos = zf.infolist()
-            if len(infos) > MAX_ARRAYS:
-                raise ValueError(f"{where!r} holds {len(infos)} arrays, more than the limit "
-                                 f"{MAX_ARRAYS}")
-            total = 0
-            for info in infos:
-                if not info.filename.endswith(".npy"):
-                    raise ValueError(f"{where!r} holds a member {info.filename!r} that is not "
-                                     "a .npy array")
-                total += info.file_size
-                if total > budget:
-                    raise ValueError(f"{where!r} claims {total} bytes of arrays, more than "
-                                     f"the limit {budget} for a file of {file_bytes} bytes")
-                with zf.open(info) as fh:
-                    version = np.lib.format.read_magic(fh)
-                    if version not in ((1, 0), (2, 0), (3, 0)):
-                        raise ValueError(f"unsupported .npy version {version}")
-                    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                            else np.lib.format.read_array_header_2_0)
-                    shape, _, dtype = read(fh, max_header_size=10_000)
-                    header_len = fh.tell()
-                if dtype.hasobject or dtype.kind not in "biuf":
-                    raise ValueError(f"{where!r}: array {info.filename[:-4]!r} has dtype "
-                                     f"{dtype}; only numeric arrays are read")
-                nbytes = math.prod(int(n) for n in shape) * dtype.itemsize
-                if nbytes != info.file_size - header_len:
-                    raise ValueError(f"{where!r}: array {info.filename[:-4]!r} claims shape "
-                                     f"{shape} ({nbytes} bytes) but stores "
-                                     f"{info.file_size - header_len} bytes")
-        with np.load(arr_path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except ValueError as exc:
-        if where in str(exc):
-            raise
-        raise ValueError(f"{where!r} could not be read as a .npz array file: {exc}") from exc
-    except (OSError, EOFError, KeyError, zipfile.BadZipFile, NotImplementedError,
-            RuntimeError, OverflowError, SyntaxError, TypeError) as exc:
-        raise ValueError(f"{where!r} could not be read as a .npz array file: "
-                         f"{type(exc).__name__}: {exc}") from exc
-
-
 def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version: int
                    ) -> tuple[dict, dict[str, np.ndarray] | None]:
     """Read a directory written by :func:`write_model_dir`, checking format and integrity.
@@ -301,7 +253,7 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
     if _sha256(arr_path) != doc.get("arrays_sha256"):
         raise ValueError(f"{str(arr_path)!r} does not match the checksum in {DOC_FILE} "
                          "(corrupted, truncated or replaced)")
-    return doc, _load_npz(arr_path)
+    return doc, read_npz(arr_path, max_arrays=MAX_ARRAYS, max_bytes=MAX_ARRAY_BYTES)
 
 
 def _config(model) -> dict:

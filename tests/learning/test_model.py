@@ -157,7 +157,7 @@ def test_unknown_mode_and_missing_hour(fitted, data):
         columns=["energy_kwh"]),
      "soc_final above soc_initial"),
     (lambda t: t.assign(energy_kwh=np.r_[-1.0, t.energy_kwh.iloc[1:]]),
-     "invalid 'energy_kwh'.*energy_kwh=-1.0, allowed \\[0, 1000\\]"),
+     "invalid 'energy_kwh'.*energy_kwh=-1.0, allowed \\(0, 1000\\]"),
     (lambda t: t.drop(columns=["distance_km"]), "missing required column.*distance_km"),
     (lambda t: t.drop(columns=["energy_kwh"]), "need a measured outcome column"),
     (lambda t: t.assign(avg_speed_kmh=np.r_[np.nan, t.avg_speed_kmh.iloc[1:]]),

@@ -55,6 +55,9 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.core.outputs import check_output
     from hybridev.data.logs import read_measured_trips
 
+    from hybridev.core.checks import check_seed
+
+    check_seed(args.seed, "--seed")
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
     check_output(args.out, kind="dir", inputs=[args.measured, args.timeseries],
