@@ -52,10 +52,9 @@ def _vehicle(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.report.build import calibration_report
     from hybridev.apps.report.html import legacy_report
+    from hybridev.core.checks import check_seed
     from hybridev.core.outputs import check_output
     from hybridev.data.logs import read_measured_trips
-
-    from hybridev.core.checks import check_seed
 
     check_seed(args.seed, "--seed")
     if not 0.0 < args.level < 1.0:
