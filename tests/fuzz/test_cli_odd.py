@@ -203,3 +203,29 @@ def test_predict_rewrites_its_own_output_and_refuses_model_folder(work, monkeypa
     assert rc == 2 and "--out='model' is also an input" in err
     rc, err = run_cli(["fit", "measured.csv", "--out", "model", *FIT])  # a model it wrote
     assert rc == 0, err
+
+
+@pytest.mark.slow
+def test_demo_keeps_the_users_files(tmp_path):
+    from hybridev.apps.demo import DEMO_OUTPUTS, run_demo
+
+    res = tmp_path / "results"
+    res.mkdir()
+    (res / "my_notes.txt").write_text("keep me")
+    for _ in range(2):  # the second run replaces only what the first wrote
+        run_demo(res, n_trips=120, quick=True, echo=lambda s: None)
+    assert (res / "my_notes.txt").read_text() == "keep me"
+    assert set(DEMO_OUTPUTS) <= {p.name for p in res.iterdir()}
+    assert not [p for p in res.rglob(".*") if p.name != "hybridev-manifest.json"]
+
+
+def test_demo_refuses_a_users_file_of_its_names_before_the_work(tmp_path):
+    from hybridev.apps.demo import run_demo
+
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "charging_plan.csv").write_text("mine")
+    before = snapshot(other)
+    with pytest.raises(ValueError, match=r"out_dir=.*charging_plan\.csv.*not written there"):
+        run_demo(other, n_trips=120, quick=True, echo=lambda s: None)
+    assert snapshot(other) == before
