@@ -45,8 +45,14 @@ DEMO_OUTPUTS = ("summary.json", "charging_plan.csv", "test_predictions.csv",
 
 
 def _legacy_demo(folder: Path) -> bool:
-    """A demo folder of an older hybridev (no manifest): demo outputs only."""
-    return {p.name for p in folder.iterdir()} <= set(DEMO_OUTPUTS)
+    """A demo folder of an older hybridev (no manifest): demo outputs only, with its summary."""
+    names = {p.name for p in folder.iterdir() if not p.name.startswith(".")}
+    if not {"summary.json", "report"} <= names <= set(DEMO_OUTPUTS):
+        return False
+    try:
+        return "headline" in json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, TypeError):
+        return False
 
 
 def example_tariff(days: int = 7, *, slot_minutes: int = 15) -> pd.DataFrame:
