@@ -161,3 +161,9 @@ def test_measured_validation_accounts_for_every_row(df, dup):
     for col in ("distance_km", "energy_kwh"):
         x = good[col].to_numpy(float)
         assert np.all(np.isfinite(x)) and np.all(x > 0)
+
+
+def test_boolean_time_series_columns_are_refused():
+    trips, ts = _trips_and_series(2)
+    with pytest.raises(ValueError, match="column 'speed_kmh' has dtype bool"):
+        measured_from_frames(trips, ts.assign(speed_kmh=True))
