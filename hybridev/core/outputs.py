@@ -36,7 +36,12 @@ suffixes=..., inputs=[...], names=[...]) -> Path``
     Context manager yielding a temporary folder; on success a manifest with
     the SHA-256 of every file is added and the folder moved into place.
 ``read_manifest(folder)``, ``is_hybridev_dir(folder)``
-    Inspect a folder's marker.
+    Inspect a folder's marker (from :mod:`hybridev.core.manifest`).
+
+Clean-up on signals lives in :mod:`hybridev.core.cleanup`; safe ``.npz``
+reading in :mod:`hybridev.core.npz`. Callers that add inputs or outputs (new
+CLI options) pass every input path to ``inputs=`` and call
+:func:`check_output` before reading anything large.
 """
 
 from __future__ import annotations
