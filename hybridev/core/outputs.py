@@ -171,6 +171,9 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
                              "file with a folder: choose another path")
         if p.is_dir() and p.is_symlink():
             raise ValueError(f"{what} is a symbolic link; give the real folder")
+        if p.is_dir() and kind in ("model_dir", "dir") and _inside(Path(os.getcwd()), rp):
+            raise ValueError(f"{what} is the current folder (or holds it); it would be "
+                             "replaced as a whole: give a new folder name")
         if p.is_dir() and kind in ("model_dir", "dir"):
             doc = read_manifest(p) or {}
             other = doc.get("kind", kind)

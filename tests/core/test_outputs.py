@@ -44,7 +44,7 @@ def test_file_checks_name_the_option(tmp_path):
     assert f.read_text() == "mine\n" and list(d.iterdir()) == []
 
 
-def test_folder_checks(tmp_path):
+def test_folder_checks(tmp_path, monkeypatch):
     user = tmp_path / "data"
     user.mkdir()
     (user / "m.csv").write_text("x\n")
@@ -62,6 +62,11 @@ def test_folder_checks(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert O.check_output(empty, kind="model_dir") == empty
+    monkeypatch.chdir(empty)  # the current folder is never replaced, even when empty
+    for out in (".", str(empty), str(tmp_path)):
+        with pytest.raises(ValueError, match="is the current folder"):
+            O.check_output(out, kind="dir")
+    assert O.check_output(".", kind="merge_dir") == empty  # written into, not replaced
     assert O.check_output(tmp_path / "new" / "deeper", kind="dir").name == "deeper"
     with pytest.raises(ValueError, match="lies inside the input folder"):
         O.check_output(user / "out.csv", inputs=[user])
