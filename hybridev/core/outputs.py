@@ -246,7 +246,16 @@ def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[P
 
 
 def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
-    """Write a DataFrame as CSV or Parquet (by suffix), atomically."""
+    """Write a DataFrame as CSV or Parquet (by suffix), atomically.
+
+    Examples
+    --------
+    >>> import tempfile, pandas as pd
+    >>> d = Path(tempfile.mkdtemp())
+    >>> write_table(pd.DataFrame({"a": [1]}), d / "t.csv")
+    >>> (d / "t.csv").read_text()
+    'a\n1\n'
+    """
     with atomic_file(path, option=option) as tmp:
         if Path(path).suffix.lower() in (".parquet", ".pq"):
             df.to_parquet(tmp, index=False)
@@ -255,7 +264,16 @@ def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
 
 
 def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:
-    """Write UTF-8 text (JSON, HTML, Markdown), atomically."""
+    """Write UTF-8 text (JSON, HTML, Markdown), atomically.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> write_text("{}", d / "s.json")
+    >>> (d / "s.json").read_text()
+    '{}'
+    """
     with atomic_file(path, option=option) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
