@@ -9,7 +9,8 @@ It runs what a new user should see first, in a few minutes on a laptop:
    floor, interval coverage;
 4. a range example with confidence bands and a one-week charging plan;
 5. figures, a calibration report and ``summary.json`` written into the output
-   folder (atomically: a failed run leaves the previous folder untouched).
+   folder (atomically: a failed run leaves the previous outputs untouched, and
+   files the user put in that folder are never touched).
 
 Every number printed comes from this run; nothing is stored in advance.
 """
@@ -29,13 +30,29 @@ from hybridev.apps.charging.plan import plan_charging
 from hybridev.apps.range import predict_range
 from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 from hybridev.apps.report.build import calibration_report
-from hybridev.core.fileio import atomic_dir
+from hybridev.core.checks import check_seed
+from hybridev.core.outputs import check_output, output_dir
 from hybridev.learning.model import HybridModel
 from hybridev.metrics import coverage, mape, mean_width
 from hybridev.physics.oracle import oracle_mape_pct
 from hybridev.physics.truth import make_dataset
 
-__all__ = ["example_schedule", "example_tariff", "run_demo"]
+__all__ = ["DEMO_OUTPUTS", "example_schedule", "example_tariff", "run_demo"]
+
+DEMO_OUTPUTS = ("summary.json", "charging_plan.csv", "test_predictions.csv",
+                "predicted_vs_measured.png", "range_fan.png", "charging_plan.png", "report")
+"""The entries ``run_demo`` writes into its output folder; nothing else there is touched."""
+
+
+def _legacy_demo(folder: Path) -> bool:
+    """A demo folder of an older hybridev (no manifest): demo outputs only, with its summary."""
+    names = {p.name for p in folder.iterdir() if not p.name.startswith(".")}
+    if not {"summary.json", "report"} <= names <= set(DEMO_OUTPUTS):
+        return False
+    try:
+        return "headline" in json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, TypeError):
+        return False
 
 
 def example_tariff(days: int = 7, *, slot_minutes: int = 15) -> pd.DataFrame:
@@ -187,13 +204,16 @@ def _figures(out_dir: Path, test: pd.DataFrame, pred: pd.DataFrame, fan: pd.Data
 
 def run_demo(out_dir: str | os.PathLike = "results", *, seed: int = 0, n_trips: int = 1500,
              quick: bool = False, stage: Callable[[str], None] | None = None,
-             echo: Callable[[str], None] = print) -> dict:
+             echo: Callable[[str], None] = print, option: str = "out_dir") -> dict:
     """Run the demonstration and write its outputs.
 
     Parameters
     ----------
     out_dir : path
-        Output folder (replaced as a whole, atomically).
+        Output folder. The entries :data:`DEMO_OUTPUTS` are written into it
+        (each atomically); other files there are kept, and an existing entry of
+        those names is replaced only if an earlier demo wrote it (else a
+        ``ValueError`` naming ``option``, raised before the work).
     seed : int
         Seeds the dataset, the split and the model.
     n_trips : int
@@ -204,6 +224,8 @@ def run_demo(out_dir: str | os.PathLike = "results", *, seed: int = 0, n_trips: 
         Called with the name of each finished stage (progress bars).
     echo : callable
         Receives the human-readable lines (default: print).
+    option : str
+        Name of ``out_dir`` in error messages (the CLI passes ``"--out"``).
 
     Returns
     -------
@@ -211,6 +233,9 @@ def run_demo(out_dir: str | os.PathLike = "results", *, seed: int = 0, n_trips: 
         The summary also written to ``summary.json``.
     """
     done = stage or (lambda _name: None)
+    check_seed(seed)
+    check_output(out_dir, option=option, kind="merge_dir", names=DEMO_OUTPUTS,
+                 legacy=_legacy_demo)  # before the work
     t0 = time.perf_counter()
     data = make_dataset(n_trips, truth="structured", seed=seed)
     order = np.random.default_rng([seed, 7]).permutation(len(data))
@@ -248,7 +273,8 @@ def run_demo(out_dir: str | os.PathLike = "results", *, seed: int = 0, n_trips: 
     echo(plan.summary())
     done("charging")
 
-    with atomic_dir(out_dir) as tmp:
+    with output_dir(out_dir, option=option, kind="merge_dir", manifest={"content": "demo"},
+                    legacy=_legacy_demo) as tmp:
         figures = _figures(tmp, test, pred, fan, ranges, plan)
         report = calibration_report(
             train.assign(session_group=train["trip_id"] // 10), out_dir=tmp / "report",

@@ -81,6 +81,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.learning.features import normalize_modes
 from hybridev.learning.model import HybridModel
@@ -427,6 +428,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     52.5
     """
     model = _check_model(model)
+    check_seed(seed)
     cond = _check_conditions(conditions)
     q = _check_quantiles(quantiles)
     s0, sr = _check_soc(soc_initial, soc_reserve, len(cond))

@@ -18,6 +18,7 @@ from hybridev.apps.range import (
     _solve,
     quantile_column,
 )
+from hybridev.core.checks import check_seed
 from hybridev.learning.model import HybridModel
 
 __all__ = ["FAN_QUANTILES", "plot_soc_fan", "soc_fan"]
@@ -76,6 +77,7 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
     [[0.0, 0.8, 0.8, 0.8, 0.8, 0.8], [100.0, 0.63, 0.63, 0.63, 0.63, 0.63]]
     """
     model = _check_model(model)
+    check_seed(seed)
     if isinstance(condition, pd.Series):
         condition = condition.to_frame().T.infer_objects()
     elif isinstance(condition, dict):

@@ -44,6 +44,7 @@ import pandas as pd
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import DEFAULT_PARAMS, PhysicsPrior
+from hybridev.core.checks import check_seed
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 from hybridev.data.measured import validate_measured_trips
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
@@ -149,6 +150,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     >>> post.samples.shape[1], bool(post.summary().loc["aux_base_kw", "q05"] < 0.5)
     (1, True)
     """
+    seed = check_seed(seed)
     veh = vehicle or VehicleParams()
     pr = prior or PhysicsPrior()
     names = tuple(params)
@@ -219,7 +221,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     else:
         p0[bad] = theta + 1e-6 * scale * rng.standard_normal((int(bad.sum()), ndim))
     sampler = emcee.EnsembleSampler(n_walkers, ndim, logpost, vectorize=True, moves=_moves())
-    sampler.random_state = np.random.RandomState(seed).get_state()
+    legacy_seed = seed if seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
+    sampler.random_state = np.random.RandomState(legacy_seed).get_state()  # 32-bit seeds only
     state = p0
     if n_steps is not None:
         sampler.run_mcmc(state, int(n_steps), progress=progress)
@@ -285,6 +288,7 @@ def simulate_measured(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     from hybridev.physics.trips import _blocks
     from hybridev.physics.validation import validate_trips
     t = validate_trips(trips)
+    check_seed(seed)
     tp = dict(true_params or {})
     veh = vehicle_with(vehicle or VehicleParams(), tp)
     s = float(tp.get("regen_scale", 1.0))

@@ -21,11 +21,9 @@ Every check runs before any work; errors are ``ValueError`` (exit code 2).
 from __future__ import annotations
 
 import argparse
-import os
-from pathlib import Path
 
 __all__ = ["TABLE_SUFFIXES", "add_input_arguments", "add_vehicle_arguments",
-           "apply_columns", "check_dir_out", "check_table_out", "column_mapping",
+           "apply_columns", "column_mapping",
            "fill_soc_initial", "hint_missing_soc", "model_with_vehicle", "read_trips",
            "report_rejected", "vehicle_from_args"]
 
@@ -152,33 +150,6 @@ def hint_missing_soc(exc: ValueError) -> ValueError:
         return ValueError(msg + "; a logger without SoC: give --soc-initial S (e.g. 0.9), "
                           "and map your energy column to energy_kwh with --columns")
     return exc
-
-
-def check_table_out(option: str, path: str | os.PathLike | None) -> None:
-    """Before any work: ``path`` ends in a table suffix and its folder can be written."""
-    if path is None:
-        return
-    p = Path(path)
-    if p.suffix.lower() not in TABLE_SUFFIXES:
-        raise ValueError(f"{option}={str(path)!r} must end in one of {list(TABLE_SUFFIXES)}")
-    if p.is_dir():
-        raise ValueError(f"{option}={str(path)!r} is a directory; give a file name")
-    anc = p.parent
-    while not anc.exists() and anc != anc.parent:
-        anc = anc.parent
-    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
-        raise ValueError(f"{option}={str(path)!r} is not writable: {str(anc)!r}")
-
-
-def check_dir_out(option: str, path: str | os.PathLike | None) -> None:
-    """Before any work: ``path`` is a directory name, not a file with a table suffix."""
-    if path is None:
-        return
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise ValueError(f"{option}={str(path)!r} is an existing file; give a directory")
-    if p.suffix.lower() in (*TABLE_SUFFIXES, ".json", ".html"):
-        raise ValueError(f"{option}={str(path)!r} looks like a file name; it is a directory")
 
 
 def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,

@@ -8,7 +8,33 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__: list[str] = []
+__all__ = ["MAX_SEED", "check_seed"]
+
+MAX_SEED = 2**63 - 1
+"""Largest accepted seed (seeds are integers in [0, 2**63 - 1])."""
+
+
+def check_seed(seed, name: str = "seed") -> int:
+    """Return ``seed`` as an int, or raise a ValueError naming ``name``.
+
+    A seed is an integer (not a bool) in [0, 2**63 - 1].
+
+    Examples
+    --------
+    >>> check_seed(3)
+    3
+    >>> check_seed(-1)
+    Traceback (most recent call last):
+    ...
+    ValueError: seed=-1 is outside the allowed range: an integer in [0, 2**63 - 1]
+    """
+    import numbers
+
+    ok = isinstance(seed, numbers.Integral) and not isinstance(seed, bool | np.bool_)
+    if not ok or not 0 <= int(seed) <= MAX_SEED:
+        raise ValueError(f"{name}={seed!r} is outside the allowed range: an integer in "
+                         "[0, 2**63 - 1]")
+    return int(seed)
 def _fail(name: str, x: np.ndarray, bad: np.ndarray, need: str) -> None:
     if np.any(bad):
         i = int(np.flatnonzero(np.broadcast_to(bad, x.shape))[0])

@@ -24,7 +24,61 @@ from hybridev.data.timeseries import (
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = ["MeasuredTrips", "measured_from_frames", "read_measured_trips"]
+__all__ = ["TRACE_TOLERANCE", "MeasuredTrips", "measured_from_frames", "read_measured_trips"]
+
+TRACE_TOLERANCE = 0.10
+"""Largest relative difference allowed between a trip row and its logged trace:
+``distance_km`` within 10 % (or 0.05 km) of the trace's distance, and
+``avg_speed_kmh`` within 10 % (or 2 km/h) of the trace's mean speed over the
+whole logged duration or over its moving time (speed above 1 km/h). A row
+outside is rejected with both numbers in the reason."""
+
+
+def _trace_mismatch(trips: pd.DataFrame, traces: LoggedTraces) -> list[pd.DataFrame]:
+    """Rows whose given distance or mean speed disagrees with their logged trace."""
+    out = []
+    if "trip_id" not in trips.columns or len(traces) == 0:
+        return out
+    tid = trips["trip_id"].astype(object)
+    pos = pd.Index(traces.trip_id).get_indexer(tid)
+    has = pos >= 0
+    d_tr = traces.distance_km()
+    dur = traces.duration_s()
+    moving = traces.speed_mps > 1.0 / 3.6
+    start, trip = traces.intervals()
+    dt = traces.t_s[start + 1] - traces.t_s[start]
+    t_moving = np.bincount(trip, dt * (moving[start] | moving[start + 1]), minlength=len(traces))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v_all = d_tr / dur * 3600.0
+        v_move = np.where(t_moving > 0, d_tr / t_moving * 3600.0, v_all)
+    seen = np.zeros(len(trips), dtype=bool)
+    checks = (("distance_km", (d_tr,), 0.05, "{v!r} differs from its logged trace's "
+               "distance {a:.3g} km by more than 10 %"),
+              ("avg_speed_kmh", (v_all, v_move), 2.0, "{v!r} differs from its logged trace's "
+               "mean speed {a:.3g} km/h (moving {b:.3g} km/h) by more than 10 %"))
+    for field, refs, slack, why in checks:
+        if field not in trips.columns:
+            continue
+        x = pd.to_numeric(trips[field], errors="coerce").to_numpy(float)
+        given = has & np.isfinite(x)
+        ok = np.ones(len(trips), dtype=bool)
+        ok_any = np.zeros(len(trips), dtype=bool)
+        for ref in refs:
+            r = np.full(len(trips), np.nan)
+            r[has] = ref[pos[has]]
+            ok_any |= np.abs(x - r) <= np.maximum(TRACE_TOLERANCE * np.abs(r), slack)
+        ok[given] = ok_any[given]
+        bad = ~ok & ~seen
+        if bad.any():
+            a = refs[0][pos[bad]]
+            b = refs[-1][pos[bad]]
+            out.append(pd.DataFrame({
+                "source": "trips", "row": trips.index[bad], "trip_id": tid[bad].to_numpy(),
+                "field": field, "value": x[bad],
+                "reason": [f"{field}=" + why.format(v=v, a=aa, b=bb) for v, aa, bb in
+                           zip(x[bad].tolist(), a.tolist(), b.tolist(), strict=True)]}))
+            seen |= bad
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,19 +165,31 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
     (1.2, 72.0)
     """
     veh = vehicle or VehicleParams()
+    if isinstance(trips, pd.DataFrame) and len(trips) == 0:
+        raise ValueError(f"measured trips: the table has no rows (columns "
+                         f"{list(trips.columns)[:8]}); at least one trip is required")
+    if isinstance(timeseries, pd.DataFrame) and len(timeseries) == 0:
+        raise ValueError("timeseries: the table has no rows; give logged samples or leave "
+                         "the time series out")
     traces, ts_rej = None, pd.DataFrame(columns=REJECTED_COLUMNS)
-    table = trips
+    table, mismatch = trips, []
     if timeseries is not None:
         if not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
             raise ValueError("trips need a 'trip_id' column to be matched with a time series")
         traces, ts_rej = validate_timeseries(timeseries, min_samples=min_samples,
                                              max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+        mismatch = _trace_mismatch(trips, traces)
         table = _derive_from_traces(trips, traces)
     extra = []
     if isinstance(table, pd.DataFrame) and "trip_id" in table.columns:
         tid = table["trip_id"].astype(object)
         dup = tid.duplicated(keep="first").to_numpy()
         bad_ts = tid.isin(ts_rej["trip_id"].dropna()).to_numpy() & ~dup
+        off = np.zeros(len(table), dtype=bool)
+        if mismatch:
+            m_rows = pd.concat(mismatch)
+            off = table.index.isin(m_rows["row"]) & ~dup & ~bad_ts
+            extra.append(m_rows[m_rows["row"].isin(table.index[off])])
         for mask, field, why in ((dup, "trip_id", "duplicate trip_id={v!r}"),
                                  (bad_ts, "trip_id", "time series of trip_id={v!r} was rejected")):
             if mask.any():
@@ -131,10 +197,10 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
                     "source": "trips", "row": table.index[mask], "trip_id": tid[mask].to_numpy(),
                     "field": field, "value": tid[mask].to_numpy(),
                     "reason": [why.format(v=v) for v in tid[mask].tolist()]}))
-        table = table.loc[~(dup | bad_ts)]
+        table = table.loc[~(dup | bad_ts | off)]
         if len(table) == 0:
-            raise ValueError("measured trips: all rows were rejected; first reason: "
-                             f"{extra[0]['reason'].iloc[0]}")
+            first = extra[0]["reason"].iloc[0] if extra else "none given"
+            raise ValueError(f"measured trips: all rows were rejected; first reason: {first}")
     good, rej = validate_measured_trips(table, veh, on_error="collect")
     if len(rej):
         rej = rej.assign(source="trips", trip_id=(
@@ -169,7 +235,9 @@ def read_measured_trips(trips_path: str | os.PathLike,
     reason, never silently dropped. With a time series
     (:func:`validate_timeseries`), the trip table needs ``trip_id``; trips
     whose trace was rejected are rejected too; duplicated ``trip_id`` rows are
-    rejected after the first. Missing or empty ``distance_km``,
+    rejected after the first. A row whose ``distance_km`` or ``avg_speed_kmh``
+    disagrees with its logged trace by more than :data:`TRACE_TOLERANCE` is
+    rejected with both numbers. Missing or empty ``distance_km``,
     ``avg_speed_kmh`` (distance / logged duration), ``temperature_c`` (time
     mean of ``amb_temp_c``), ``soc_initial`` and ``soc_final`` (first and last
     logged ``soc``; only when the table has no ``energy_kwh``) are derived from

@@ -6,7 +6,8 @@ least one measured outcome:
 ==================  ======  ==================================================
 column              unit    meaning
 ==================  ======  ==================================================
-``energy_kwh``      kWh     measured battery energy used, [0, 1000]
+``energy_kwh``      kWh     measured battery energy used, (0, 1000]; a row with
+                            0 (nothing measured) is reported as a bad row
 ``soc_final``       --      measured state of charge on arrival, [0, 1], and
                             not above ``soc_initial``
 ==================  ======  ==================================================
@@ -15,7 +16,12 @@ column              unit    meaning
 models handle such rows as documented on the model. When ``energy_kwh`` is
 missing it is derived as ``(soc_initial - soc_final) * C``; rows whose
 ``soc_final`` is 0 are then rejected, because an empty battery only bounds
-the energy from below.
+the energy from below, and rows whose derived energy is not positive
+(``soc_final == soc_initial``) are rejected as measuring nothing.
+
+Duplicate ``trip_id`` values (one policy everywhere): the first row of a
+``trip_id`` is kept and every later row with it is a bad row
+(``"raise"``: a ``ValueError`` naming ``trip_id``; ``"collect"``: reported).
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ OUTCOME_COLUMNS = ("energy_kwh", "soc_final")
 
 MEASURED_RULES: dict[str, FieldRule] = {
     **TRIP_RULES,
-    "energy_kwh": FieldRule(0.0, 1000.0),
+    "energy_kwh": FieldRule(0.0, 1000.0, lo_open=True),
     "soc_final": FieldRule(0.0, 1.0),
 }
 
@@ -79,9 +85,24 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
     if isinstance(table, pd.DataFrame) and not any(c in table.columns for c in OUTCOME_COLUMNS):
         raise ValueError(f"measured trips need a measured outcome column: one of "
                          f"{list(OUTCOME_COLUMNS)}; got columns {list(table.columns)}")
+    extra = []
+    if isinstance(table, pd.DataFrame) and "trip_id" in table.columns and len(table):
+        tid = table["trip_id"].astype(object)
+        dup = tid.duplicated(keep="first").to_numpy()
+        if dup.any():
+            first = tid[dup].iloc[0]
+            if on_error == "raise":
+                raise ValueError(f"measured trips: {int(dup.sum())} row(s) repeat a trip_id; "
+                                 f"first at row {table.index[dup][0]!r}: trip_id={first!r} "
+                                 "(each trip_id must be unique)")
+            extra.append(pd.DataFrame({
+                "row": table.index[dup], "field": "trip_id", "value": tid[dup].to_numpy(),
+                "reason": [f"duplicate trip_id={v!r}" for v in tid[dup].tolist()]}))
+            if dup.all():  # pragma: no cover - the first row is never a duplicate
+                raise ValueError("measured trips: every row is a duplicate")
+            table = table.loc[~dup]
     good, rejected = check_table(table, required=_REQUIRED, rules=MEASURED_RULES,
                                  mode_required=False, on_error=on_error, what="measured trips")
-    extra = []
     if "soc_final" in good.columns:
         s0 = good["soc_initial"].to_numpy(float)
         sf = good["soc_final"].to_numpy(float)
@@ -110,6 +131,17 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
             good = good.loc[~empty]
         good = good.assign(energy_kwh=(good["soc_initial"] - good["soc_final"])
                            * veh.battery_capacity_kwh)
+        zero = good["energy_kwh"].to_numpy(float) <= 0.0
+        if zero.any():
+            if on_error == "raise":
+                raise ValueError(f"measured trips: {int(zero.sum())} row(s) have "
+                                 f"soc_final == soc_initial (energy_kwh=0.0, nothing measured); "
+                                 f"first at row {good.index[zero][0]!r}")
+            extra.append(pd.DataFrame({
+                "row": good.index[zero], "field": "soc_final",
+                "value": good["soc_final"].to_numpy(float)[zero],
+                "reason": "soc_final equals soc_initial: energy_kwh=0.0, nothing measured"}))
+            good = good.loc[~zero]
     if "mode" not in good.columns:
         good = good.assign(mode=None)
     else:

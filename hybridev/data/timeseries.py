@@ -143,7 +143,13 @@ def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
     n_trips = len(uniq)
 
     def col(name):
-        return pd.to_numeric(ts[name], errors="coerce").to_numpy(float, na_value=np.nan)[order]
+        raw = ts[name]
+        if raw.dtype.kind in "bcmM" or str(raw.dtype) == "boolean":
+            raise ValueError(f"timeseries: column {name!r} has dtype {raw.dtype}; numbers are "
+                             "required (a boolean or date is not a number)")
+        if raw.dtype.kind == "O":
+            raw = raw.map(lambda v: np.nan if isinstance(v, bool | np.bool_) else v)
+        return pd.to_numeric(raw, errors="coerce").to_numpy(float, na_value=np.nan)[order]
 
     t = col("t_s")
     v_kmh = col("speed_kmh")

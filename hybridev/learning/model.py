@@ -64,6 +64,7 @@ from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
 from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.predictive import soc_from_energy
+from hybridev.learning.refit import RefitGuardMixin
 from hybridev.learning.uncertainty import ProbabilisticMixin
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
@@ -93,7 +94,7 @@ _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
 
 
-class HybridModel(ProbabilisticMixin, BaseEstimator):
+class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     """Hybrid physics + residual-network predictor of trip energy and final SoC.
 
     Parameters

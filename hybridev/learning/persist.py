@@ -1,52 +1,78 @@
 """Model directories on disk: one JSON document plus one ``.npz`` of arrays, no pickle.
 
 :func:`save_model` / :func:`load_model` implement ``HybridModel.save`` and
-``HybridModel.load``. Layout of a model directory::
+``HybridModel.load``. Layout of a model directory (format version 2)::
 
-    model.json     format name and version, hybridev version, configuration,
-                   vehicle, feature names, training summary, and the name and
-                   SHA-256 of the array file
-    arrays.npz     numpy arrays (network weights, scalers, loss curves);
-                   absent when nothing was fitted
+    model.json              format name and version, hybridev version, configuration,
+                            vehicle, feature names, training summary, and the name and
+                            SHA-256 of the array file
+    arrays.npz              numpy arrays (network weights, scalers, loss curves);
+                            absent when nothing was fitted
+    hybridev-manifest.json  the marker of a folder written by hybridev
+                            (:mod:`hybridev.core.outputs`): ``kind: "model_dir"``,
+                            format name and version, and the SHA-256 of every file
 
 Extensions of the model (a physics posterior, a conformal calibration) keep
 their state through ``model._extra_state() -> (json_dict, arrays)`` and
 ``model._set_extra_state(json_dict, arrays)``, stored under ``"extra"`` and as
 ``extra.*`` arrays.
 
-Writing is atomic (:func:`hybridev.core.fileio.atomic_dir`): a failed save leaves any
-previous directory untouched. Reading checks everything it can and raises a
+Writing goes through :func:`hybridev.core.outputs.output_dir`: atomic (a failed
+or interrupted save leaves any previous directory untouched and no temporary
+folder), and an existing folder is replaced only when it is a model (or other
+folder) written by hybridev, never a user's folder or file.
+
+Reading verifies before it allocates: the manifest's SHA-256 of every file
+(any changed byte is refused), then the ``.npz`` member count, each member's
+``.npy`` header (dtype, shape) against the bytes stored and the size limits
+:data:`MAX_ARRAYS` and :data:`MAX_ARRAY_BYTES`, then the network size implied
+by the configuration against the stored weights. Every failure is a
 ``ValueError`` naming the file and the problem: missing or unreadable files,
 invalid JSON, another format or format version, a model written by another
 major version of hybridev, a checksum mismatch (corruption, truncation), and
-(through :func:`read_model_dir`'s callers) wrong names or shapes.
+wrong names or shapes. Models of format version 1 (no manifest; only the
+array file is checksummed) still load.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from hybridev.core.fileio import atomic_dir
-from hybridev.learning.nn import EnsembleMLP
+from hybridev.core.npz import read_npz
+from hybridev.core.outputs import (
+    MANIFEST_FILE,
+    check_output,
+    output_dir,
+    read_manifest,
+    sha256_file,
+)
+from hybridev.learning.nn import EnsembleMLP, n_parameters
 from hybridev.physics.params import VehicleParams
 
-__all__ = ["ARRAYS_FILE", "DOC_FILE", "FORMAT_NAME", "FORMAT_VERSION", "load_model",
-           "read_model_dir", "save_model", "write_model_dir"]
+__all__ = ["ARRAYS_FILE", "DOC_FILE", "FORMAT_NAME", "FORMAT_VERSION", "MAX_ARRAYS",
+           "MAX_ARRAY_BYTES", "check_model_path", "load_model", "read_model_dir", "save_model", "write_model_dir"]
 
 DOC_FILE = "model.json"
 ARRAYS_FILE = "arrays.npz"
 FORMAT_NAME = "hybridev.learning.model"
 """Format name of a saved :class:`hybridev.HybridModel` (or subclass)."""
-FORMAT_VERSION = 1
-"""Version of that format; files of any other version are refused."""
+FORMAT_VERSION = 2
+"""Version of that format (2: with a manifest of SHA-256 sums); version 1 is still read,
+other versions are refused."""
+READ_VERSIONS = (1, 2)
+MAX_ARRAYS = 4096
+"""At most this many arrays in ``arrays.npz``."""
+MAX_ARRAY_BYTES = 1 << 30
+"""At most this many bytes of arrays in total (1 GiB), and at most 64 times the
+size of the ``.npz`` file plus 16 MiB (a small file cannot claim huge arrays)."""
+MAX_DOC_BYTES = 64 << 20
+"""At most this size of ``model.json`` and of the manifest (64 MiB)."""
 
 
 def _major(version: str) -> int:
@@ -54,14 +80,52 @@ def _major(version: str) -> int:
 
 
 def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    return sha256_file(path)
 
 
-def write_model_dir(path: str | os.PathLike, doc: dict, arrays: dict[str, np.ndarray] | None
-                    ) -> None:
+def _legacy_model(folder: Path) -> bool:
+    """A model folder of format version 1 (no manifest): model.json (+ arrays.npz) only."""
+    names = {p.name for p in folder.iterdir()}
+    if not names <= {DOC_FILE, ARRAYS_FILE} or DOC_FILE not in names:
+        return False
+    try:
+        doc = json.loads((folder / DOC_FILE).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(doc, dict) and str(doc.get("format", "")).startswith("hybridev")
+
+
+def check_model_path(path: str | os.PathLike, *, option: str = "path",
+                     inputs=()) -> Path:
+    """Check, before any work, that a model may be saved at ``path``.
+
+    ``path`` must be new, an empty folder or a model folder hybridev wrote, and
+    not one of ``inputs`` (:func:`hybridev.core.outputs.check_output`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> (d / "notes.txt").write_text("mine")
+    4
+    >>> check_model_path(d, option="--out")
+    Traceback (most recent call last):
+    ...
+    ValueError: --out=... is an existing folder with files hybridev did not write there ...
+    """
+    return check_output(path, option=option, kind="model_dir", inputs=inputs,
+                        legacy=_legacy_model)
+
+
+def write_model_dir(path: str | os.PathLike, doc: dict, arrays: dict[str, np.ndarray] | None,
+                    *, option: str = "path") -> None:
     """Write ``doc`` (JSON-serialisable) and ``arrays`` to the directory ``path``, atomically.
 
-    ``doc`` gains ``hybridev_version``, ``arrays_file`` and ``arrays_sha256``.
+    ``doc`` gains ``hybridev_version``, ``arrays_file`` and ``arrays_sha256``;
+    the folder gains the manifest (SHA-256 of both files, ``doc["format"]``
+    and ``doc["format_version"]``). An existing folder is replaced only when
+    hybridev wrote it (:func:`hybridev.core.outputs.check_output`, kind
+    ``"model_dir"``); otherwise a ``ValueError`` names ``option``.
 
     Examples
     --------
@@ -75,7 +139,9 @@ def write_model_dir(path: str | os.PathLike, doc: dict, arrays: dict[str, np.nda
     from hybridev import __version__
 
     doc = dict(doc, hybridev_version=__version__)
-    with atomic_dir(path) as tmp:
+    info = {"format": doc.get("format"), "format_version": doc.get("format_version")}
+    with output_dir(path, option=option, kind="model_dir", manifest=info,
+                    legacy=_legacy_model) as tmp:
         if arrays is not None:
             with open(tmp / ARRAYS_FILE, "wb") as fh:
                 np.savez_compressed(fh, **arrays)
@@ -87,9 +153,57 @@ def write_model_dir(path: str | os.PathLike, doc: dict, arrays: dict[str, np.nda
                                     encoding="utf-8")
 
 
+def _read_json(path: Path) -> dict:
+    try:
+        size = path.stat().st_size
+        if size > MAX_DOC_BYTES:
+            raise ValueError(f"{str(path)!r} is {size} bytes, more than the limit "
+                             f"{MAX_DOC_BYTES}")
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"{str(path)!r} is not valid JSON (corrupted or truncated?): "
+                         f"{exc}") from exc
+    if not isinstance(doc, dict):
+        raise ValueError(f"{str(path)!r} must hold a JSON object; got {type(doc).__name__}")
+    return doc
+
+
+def _verify_manifest(path: Path, doc: dict, format_name: str, format_version: int) -> None:
+    """Check the manifest of a format-2 folder: its fields and every file's SHA-256."""
+    man_path = path / MANIFEST_FILE
+    if not man_path.is_file():
+        raise ValueError(f"{str(man_path)!r} is missing: a model of format_version "
+                         f"{doc.get('format_version')} carries a manifest of SHA-256 sums")
+    man = _read_json(man_path)
+    if read_manifest(path) is None:
+        raise ValueError(f"{str(man_path)!r} is not a hybridev manifest")
+    if (man.get("kind") != "model_dir" or man.get("format") != format_name
+            or man.get("format_version") != format_version):
+        raise ValueError(f"{str(man_path)!r} describes kind={man.get('kind')!r}, format="
+                         f"{man.get('format')!r}, format_version={man.get('format_version')!r}; "
+                         f"expected 'model_dir', {format_name!r}, {format_version}")
+    files = man["files"]
+    need = {DOC_FILE} | ({ARRAYS_FILE} if doc.get("arrays_file") is not None else set())
+    missing = sorted(need - set(files))
+    if missing:
+        raise ValueError(f"{str(man_path)!r} does not list {missing[0]!r}")
+    for name, digest in files.items():
+        f = path / name
+        if not isinstance(name, str) or "/" in name or name.startswith("."):
+            raise ValueError(f"{str(man_path)!r} lists an invalid file name {name!r}")
+        if not f.is_file():
+            raise ValueError(f"{str(f)!r} is missing (listed in {MANIFEST_FILE})")
+        if _sha256(f) != digest:
+            raise ValueError(f"{str(f)!r} does not match its SHA-256 in {MANIFEST_FILE} "
+                             "(corrupted, truncated or edited)")
+
+
 def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version: int
                    ) -> tuple[dict, dict[str, np.ndarray] | None]:
     """Read a directory written by :func:`write_model_dir`, checking format and integrity.
+
+    ``format_version`` is the current version; version 1 (no manifest) is
+    read too when ``format_version`` is 2.
 
     Returns
     -------
@@ -107,19 +221,15 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
         raise ValueError(f"model directory {str(path)!r} does not exist or is not a directory")
     if not doc_path.is_file():
         raise ValueError(f"{str(doc_path)!r} is missing: {str(path)!r} is not a saved model")
-    try:
-        doc = json.loads(doc_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{str(doc_path)!r} is not valid JSON (corrupted or truncated?): "
-                         f"{exc}") from exc
-    if not isinstance(doc, dict):
-        raise ValueError(f"{str(doc_path)!r} must hold a JSON object; got {type(doc).__name__}")
+    doc = _read_json(doc_path)
     if doc.get("format") != format_name:
         raise ValueError(f"{str(doc_path)!r} has format={doc.get('format')!r}; "
                          f"expected {format_name!r}")
-    if doc.get("format_version") != format_version:
-        raise ValueError(f"{str(doc_path)!r} has format_version={doc.get('format_version')!r}; "
-                         f"this hybridev reads format_version {format_version} only")
+    readable = (1, format_version) if format_version == 2 else (format_version,)
+    version = doc.get("format_version")
+    if isinstance(version, bool) or version not in readable:
+        raise ValueError(f"{str(doc_path)!r} has format_version={version!r}; "
+                         f"this hybridev reads format_version {' or '.join(map(str, readable))}")
     from hybridev import __version__
 
     saved = doc.get("hybridev_version")
@@ -130,6 +240,8 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
     if other_major:
         raise ValueError(f"{str(doc_path)!r} was written by hybridev {saved}; this is hybridev "
                          f"{__version__} (another major version): re-fit the model")
+    if version >= 2:  # refusals above need no trust; everything below is verified
+        _verify_manifest(path, doc, format_name, version)
     name = doc.get("arrays_file")
     if name is None:
         return doc, None
@@ -141,13 +253,7 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
     if _sha256(arr_path) != doc.get("arrays_sha256"):
         raise ValueError(f"{str(arr_path)!r} does not match the checksum in {DOC_FILE} "
                          "(corrupted, truncated or replaced)")
-    try:
-        with np.load(arr_path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"{str(arr_path)!r} could not be read as a .npz array file: "
-                         f"{exc}") from exc
-    return doc, arrays
+    return doc, read_npz(arr_path, max_arrays=MAX_ARRAYS, max_bytes=MAX_ARRAY_BYTES)
 
 
 def _config(model) -> dict:
@@ -159,8 +265,12 @@ def _config(model) -> dict:
     return p
 
 
-def save_model(model, path: str | os.PathLike) -> None:
-    """Write a (fitted or unfitted) :class:`hybridev.HybridModel` to the directory ``path``."""
+def save_model(model, path: str | os.PathLike, *, option: str = "path") -> None:
+    """Write a (fitted or unfitted) :class:`hybridev.HybridModel` to the directory ``path``.
+
+    ``path`` must be new, empty or a folder hybridev wrote (else ``ValueError``
+    naming ``option``); see :func:`write_model_dir`.
+    """
     model._check_params()
     fitted = hasattr(model, "net_")
     doc = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
@@ -182,7 +292,7 @@ def save_model(model, path: str | os.PathLike) -> None:
     doc["extra"] = extra_doc
     if extra_arrays:
         arrays = {**(arrays or {}), **{f"extra.{k}": v for k, v in extra_arrays.items()}}
-    write_model_dir(path, doc, arrays)
+    write_model_dir(path, doc, arrays, option=option)
 
 
 def _restore(model, doc: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -191,6 +301,13 @@ def _restore(model, doc: dict, arrays: dict[str, np.ndarray]) -> None:
     if names != model._feature_names():
         raise ValueError(f"feature_names={list(names)!r} do not match the model's features "
                          f"{list(model._feature_names())!r}")
+    stored = sum(int(v.size) for k, v in arrays.items() if k.startswith("net."))
+    need = int(model.n_members) * n_parameters(len(names), model.hidden,
+                                               heteroscedastic=bool(model.heteroscedastic))
+    if need != stored:  # checked before the network is allocated
+        raise ValueError(f"the configuration (n_members={model.n_members}, hidden="
+                         f"{list(model.hidden)}) needs {need} network weights, but "
+                         f"{ARRAYS_FILE} stores {stored}")
     net = EnsembleMLP(len(names), model.hidden, n_members=model.n_members,
                       dropout=model.dropout, heteroscedastic=model.heteroscedastic)
     net.load_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("net.")},
@@ -241,7 +358,8 @@ def load_model(cls, path: str | os.PathLike):
             _restore(model, doc, arrays)
         model._set_extra_state(doc.get("extra", {}), {
             k[len("extra."):]: v for k, v in (arrays or {}).items() if k.startswith("extra.")})
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError,
+            RuntimeError) as exc:
         msg = f"missing entry {exc}" if isinstance(exc, KeyError) else str(exc)
         raise ValueError(f"{where} is not a valid saved {cls.__name__}: {msg}") from exc
     return model

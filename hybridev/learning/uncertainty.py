@@ -59,6 +59,7 @@ from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
+from hybridev.core.checks import check_seed
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.physical import energy_floor_kwh, held_feature_table
@@ -215,6 +216,7 @@ class ProbabilisticMixin:
             a model without predictive spread.
         """
         self._require_probabilistic("predict_distribution")
+        check_seed(seed)
         q = self._conformal_factor(level)
         _, dist = self._distribution(trips, seed=seed, traces=as_traces(timeseries))
         if q is None:
@@ -268,6 +270,7 @@ class ProbabilisticMixin:
         True
         """
         self._require_probabilistic("predict_interval")
+        check_seed(seed)
         q = self._conformal_factor(level)
         table, dist = self._distribution(trips, seed=seed, traces=as_traces(timeseries))
         mu, sd = dist.mean(), dist.std()

@@ -175,6 +175,9 @@ def synthesize_speed_trace(distance_km, avg_speed_kmh, profile="normal", *, n_st
             bad = float(x[~(np.isfinite(x) & (x > 0))][0])
             raise ValueError(f"{name}={bad!r} is outside the allowed range (0, inf)")
     n_steps = _check_steps(n_steps)
+    from hybridev.core.checks import check_seed
+
+    seed = check_seed(seed)
     n = d.shape[0]
     prof = profile_table(profile, n, ("max_accel_mps2", "pke_mps2", "cycle_period_s",
                                              "amplitude_cv", "phase_fractions"))

@@ -172,10 +172,14 @@ class VehicleParams:
         """
         for name, val in (("a_n", a_n), ("b_n_per_kmh", b_n_per_kmh),
                           ("c_n_per_kmh2", c_n_per_kmh2)):
-            _check_range("from_coastdown", name, float(val), 0.0, 1e4)
-        _check_range("from_coastdown", "mass_kg", float(mass_kg), 0.0, 1e5, lo_open=True)
-        _check_range("from_coastdown", "frontal_area_m2", float(frontal_area_m2), 0.0, 20.0,
+            _check_range("from_coastdown", name, val, 0.0, 1e4)
+        _check_range("from_coastdown", "mass_kg", mass_kg, 0.0, 1e5, lo_open=True)
+        _check_range("from_coastdown", "frontal_area_m2", frontal_area_m2, 0.0, 20.0,
                      lo_open=True)
+        # divisors: checked here, before the conversion divides by them
+        _check_range("from_coastdown", "air_density_kg_m3", air_density_kg_m3, 0.0, 3.0,
+                     lo_open=True)
+        _check_range("from_coastdown", "gravity_mps2", gravity_mps2, 0.0, 30.0, lo_open=True)
         cda = 2.0 * c_n_per_kmh2 * 3.6**2 / air_density_kg_m3
         kwargs.setdefault("source", f"coast-down A={a_n} N, B={b_n_per_kmh} N/(km/h), "
                                     f"C={c_n_per_kmh2} N/(km/h)^2, m={mass_kg} kg")

@@ -90,7 +90,8 @@ def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> p
         raise ValueError(f"n_trips={n_trips!r} is outside the allowed range: an integer in "
                          f"[1, {_MAX_TRIPS}]")
     n = int(n_trips)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed if isinstance(seed, np.random.Generator)
+                                else _check_seed(seed))
     modes = np.array(list(PROFILES))
     return pd.DataFrame({
         "trip_id": np.arange(n),
@@ -104,9 +105,9 @@ def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> p
 
 
 def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
-        raise ValueError(f"seed={seed!r} must be an integer")
-    return int(seed)
+    from hybridev.core.checks import check_seed
+
+    return check_seed(seed)
 
 
 def _blocks(trips: pd.DataFrame, n_steps: int, seed: int

@@ -59,7 +59,14 @@ TRIP_RULES: dict[str, FieldRule] = {
 }
 
 
-def _numeric(col: pd.Series) -> np.ndarray:
+def _numeric(col: pd.Series, field: str = "column", what: str = "trips") -> np.ndarray:
+    """Numbers of a column; a bool, date or complex column is refused, bool cells are NaN."""
+    kind = col.dtype.kind
+    if kind in "bcmM" or str(col.dtype) == "boolean":
+        raise ValueError(f"{what}: column {field!r} has dtype {col.dtype}; numbers are "
+                         "required (a boolean or date is not a number)")
+    if kind == "O":
+        col = col.map(lambda v: np.nan if isinstance(v, bool | np.bool_) else v)
     return pd.to_numeric(col, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
 
 
@@ -128,7 +135,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
         if field not in out.columns:
             continue
         raw = out[field]
-        x = _numeric(raw)
+        x = _numeric(raw, field, what)
         report(field, rule.bad_mask(x), raw.to_numpy(dtype=object), rule.describe())
         out[field] = x
     if "mode" in out.columns:

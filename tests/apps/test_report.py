@@ -150,13 +150,20 @@ def test_failed_run_leaves_no_partial_directory(run, tmp_path, monkeypatch):
         R.calibration_report(run["measured"], out_dir=out, **FAST)
     assert not out.exists()
     assert list(tmp_path.iterdir()) == []  # no temporary directory left behind
-    old = tmp_path / "old_report"
+    old = tmp_path / "old_report"  # a report of an older hybridev (no manifest)
     old.mkdir()
     (old / "report.html").write_text("previous")
+    (old / "summary.json").write_text("{}")
     with pytest.raises(RuntimeError):
         R.calibration_report(run["measured"], out_dir=old, **FAST)
-    assert [p.name for p in old.iterdir()] == ["report.html"]
+    assert sorted(p.name for p in old.iterdir()) == ["report.html", "summary.json"]
     assert (old / "report.html").read_text() == "previous"
+    mine = tmp_path / "mine"  # a folder of the user's: refused before the work
+    mine.mkdir()
+    (mine / "report.html").write_text("my notes")
+    with pytest.raises(ValueError, match=r"out_dir=.*did not write there.*report\.html"):
+        R.calibration_report(run["measured"], out_dir=mine, **FAST)
+    assert (mine / "report.html").read_text() == "my notes"
 
 
 def test_split_trips_groups_seed_and_errors():

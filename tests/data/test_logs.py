@@ -17,8 +17,8 @@ from hybridev.data.logs import (
 def _trips(n=3):
     return pd.DataFrame({
         "trip_id": [f"t{i}" for i in range(n)],
-        "distance_km": [10.0 + i for i in range(n)],
-        "avg_speed_kmh": [40.0] * n,
+        "distance_km": [0.59] * n,  # consistent with _series(): 59 s at 36 km/h
+        "avg_speed_kmh": [36.0] * n,
         "temperature_c": [20.0] * n,
         "soc_initial": [0.8] * n,
         "energy_kwh": [1.5 + 0.1 * i for i in range(n)],

@@ -71,7 +71,7 @@ def test_negative_energy_is_rejected_with_reason():
     good, rejected = validate_measured_trips(t, on_error="collect")
     assert len(good) == 4
     assert rejected["field"].tolist() == ["energy_kwh"]
-    assert "energy_kwh=-0.5 outside allowed [0, 1000]" in rejected["reason"].iloc[0]
+    assert "energy_kwh=-0.5 outside allowed (0, 1000]" in rejected["reason"].iloc[0]
     with pytest.raises(ValueError, match=r"invalid 'energy_kwh'.*energy_kwh=-0.5"):
         validate_measured_trips(t)
 

@@ -17,6 +17,7 @@ from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
 from hybridev import HybridModel, PhysicsFallbackWarning, make_trips, simulate, trace_energy_kwh
+from hybridev.core.outputs import MANIFEST_FILE
 from hybridev.learning.model import PAPER_CONFIG
 from hybridev.learning.persist import ARRAYS_FILE, DOC_FILE
 
@@ -156,7 +157,7 @@ def test_unknown_mode_and_missing_hour(fitted, data):
         columns=["energy_kwh"]),
      "soc_final above soc_initial"),
     (lambda t: t.assign(energy_kwh=np.r_[-1.0, t.energy_kwh.iloc[1:]]),
-     "invalid 'energy_kwh'.*energy_kwh=-1.0, allowed \\[0, 1000\\]"),
+     "invalid 'energy_kwh'.*energy_kwh=-1.0, allowed \\(0, 1000\\]"),
     (lambda t: t.drop(columns=["distance_km"]), "missing required column.*distance_km"),
     (lambda t: t.drop(columns=["energy_kwh"]), "need a measured outcome column"),
     (lambda t: t.assign(avg_speed_kmh=np.r_[np.nan, t.avg_speed_kmh.iloc[1:]]),
@@ -219,10 +220,19 @@ def test_saved_unfitted_model_loads_and_falls_back(tmp_path, small):
         m.predict(small)
 
 
+def _resign(path):
+    """Rewrite the manifest's SHA-256 sums, as a crafted (not a corrupted) folder would."""
+    man = json.loads((path / MANIFEST_FILE).read_text())
+    for name in man["files"]:
+        man["files"][name] = hashlib.sha256((path / name).read_bytes()).hexdigest()
+    (path / MANIFEST_FILE).write_text(json.dumps(man))
+
+
 def _edit_doc(path, **changes):
     doc = json.loads((path / DOC_FILE).read_text())
     doc.update(changes)
     (path / DOC_FILE).write_text(json.dumps(doc))
+    _resign(path)
 
 
 def _replace_array(path, key, value):
@@ -239,8 +249,14 @@ def _replace_array(path, key, value):
     (lambda p: (p / ARRAYS_FILE).unlink(), "arrays.npz' is missing"),
     (lambda p: (p / DOC_FILE).write_text('{"format": "hybridev.mo'), "not valid JSON"),
     (lambda p: (p / ARRAYS_FILE).write_bytes((p / ARRAYS_FILE).read_bytes()[:500]),
-     "does not match the checksum"),
-    (lambda p: _edit_doc(p, format_version=2), "format_version=2"),
+     "does not match its SHA-256"),
+    (lambda p: ((p / ARRAYS_FILE).write_bytes((p / ARRAYS_FILE).read_bytes()[:500]),
+                _resign(p)), "does not match the checksum"),
+    (lambda p: (p / DOC_FILE).write_text((p / DOC_FILE).read_text().replace('"max_epochs": 2',
+                                                                            '"max_epochs": 3')),
+     "model.json' does not match its SHA-256"),
+    (lambda p: (p / MANIFEST_FILE).unlink(), "hybridev-manifest.json' is missing"),
+    (lambda p: _edit_doc(p, format_version=3), "format_version=3"),
     (lambda p: _edit_doc(p, format="sklearn.pickle"), "format='sklearn.pickle'"),
     (lambda p: _edit_doc(p, hybridev_version="1.0.0"), "another major version"),
     (lambda p: _edit_doc(p, estimator="PureML"), "holds a 'PureML'"),
@@ -248,7 +264,9 @@ def _replace_array(path, key, value):
     (lambda p: _edit_doc(p, config={"n_members": 1, "colour": "red"}), "colour"),
     (lambda p: _edit_doc(p, target_std=-1.0), "target_std"),
     (lambda p: _replace_array(p, "net.w0", np.zeros((1, 10, 64), np.float32)),
-     "'w0' has shape \\(1, 10, 64\\), expected \\(1, 11, 64\\)"),
+     "needs [0-9]+ network weights, but arrays.npz stores"),
+    (lambda p: _replace_array(p, "net.w0", np.zeros((1, 64, 11), np.float32)),
+     "'w0' has shape \\(1, 64, 11\\), expected \\(1, 11, 64\\)"),
     (lambda p: _replace_array(p, "feature_std", np.zeros(11)), "feature_std"),
     (lambda p: shutil.rmtree(p), "does not exist"),
 ])
@@ -270,7 +288,7 @@ def test_failed_save_leaves_previous_model_untouched(saved, tmp_path, monkeypatc
 
     monkeypatch.setattr(np, "savez_compressed", boom)
     m = HybridModel.load(path)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(ValueError, match="could not be written: disk full"):
         m.save(path)
     assert {f.name: f.read_bytes() for f in path.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["copy"]

@@ -47,7 +47,9 @@ DEFAULT_SAMPLES = {"quantile": 4000, "scenario": 300}
 
 
 def _streams(seed) -> tuple[np.random.Generator, np.random.Generator]:
-    cal, ev = np.random.default_rng(seed).spawn(2)
+    from hybridev.core.checks import check_seed
+
+    cal, ev = np.random.default_rng(check_seed(seed)).spawn(2)
     return cal, ev
 
 

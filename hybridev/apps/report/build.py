@@ -339,7 +339,9 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
     Writes ``report.html`` (self-contained: figures embedded as base64 PNG),
     ``summary.json``, ``predictions.csv`` (held-out trips), ``rejected.csv``
     and ``figures/*.png`` into ``out_dir``, atomically (replaced as a whole;
-    a failed run leaves no output).
+    a failed run leaves no output). ``out_dir`` is checked before the work: it
+    must be new, empty or a report folder hybridev wrote (see
+    :mod:`hybridev.core.outputs`); otherwise a ``ValueError`` names ``out_dir``.
 
     Parameters
     ----------
@@ -382,8 +384,11 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
     >>> sorted(s["metrics"])  # doctest: +SKIP
     ['calibrated', 'hybrid', 'nominal']
     """
+    from hybridev.apps.report.html import legacy_report
+    from hybridev.core.outputs import check_output
     from hybridev.core.progress import progress_bar
 
+    check_output(out_dir, option="out_dir", kind="dir", legacy=legacy_report)  # before the work
     if isinstance(measured, pd.DataFrame):
         measured = measured_from_frames(measured, None, vehicle)
     if not isinstance(measured, MeasuredTrips):

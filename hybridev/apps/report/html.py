@@ -18,12 +18,21 @@ import pandas as pd
 
 from hybridev.apps.report import figures as F
 from hybridev.apps.report.scoring import jsonable
-from hybridev.core.fileio import atomic_dir
+from hybridev.core.outputs import output_dir
 
-__all__ = ["FIGURES", "write_report"]
+__all__ = ["FIGURES", "REPORT_FILES", "legacy_report", "write_report"]
 
 FIGURES = ("corner", "chains", "parameters", "predicted", "residuals", "reliability")
 """Figure names, in report order (``figures/<name>.png``)."""
+REPORT_FILES = ("report.html", "summary.json", "predictions.csv", "rejected.csv",
+                *(f"figures/{name}.png" for name in FIGURES))
+"""Files of a report folder (plus the manifest of :mod:`hybridev.core.outputs`)."""
+
+
+def legacy_report(folder) -> bool:
+    """A report folder written by an older hybridev (no manifest): report files only."""
+    names = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()}
+    return {"report.html", "summary.json"} <= names <= set(REPORT_FILES)
 
 RESIDUAL_FEATURES = ("distance_km", "avg_speed_kmh", "max_speed_kmh", "temperature_c", "hour",
                      "soc_initial")
@@ -145,7 +154,7 @@ absolute error.</p>
 
 
 def write_report(result, summary: dict, rejected: pd.DataFrame | None,
-                 out_dir: str | os.PathLike) -> None:
+                 out_dir: str | os.PathLike, *, option: str = "out_dir") -> None:
     """Write ``report.html``, ``summary.json``, ``predictions.csv``, ``rejected.csv``, figures.
 
     Atomic: ``out_dir`` is replaced only when everything was written; on any
@@ -162,7 +171,8 @@ def write_report(result, summary: dict, rejected: pd.DataFrame | None,
     rej = rejected if rejected is not None else pd.DataFrame(
         columns=["row", "field", "value", "reason"])
     builders = _build_figures(result, summary)
-    with atomic_dir(out_dir) as tmp:
+    with output_dir(out_dir, option=option, kind="dir", manifest={"content": "report"},
+                    legacy=legacy_report) as tmp:
         (tmp / "figures").mkdir()
         images = {}
         for name in FIGURES:

@@ -8,7 +8,6 @@ import sys
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
-    check_dir_out,
     read_trips,
     report_rejected,
     vehicle_from_args,
@@ -44,12 +43,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.report.build import calibration_report
+    from hybridev.apps.report.html import legacy_report
+    from hybridev.core.checks import check_seed
+    from hybridev.core.outputs import check_output
     from hybridev.data.logs import MeasuredTrips
+    from hybridev.learning.persist import check_model_path
 
+    check_seed(args.seed, "--seed")
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
-    check_dir_out("--out", args.out)
-    check_dir_out("--save-model", args.save_model)
+    inputs = [args.measured, args.timeseries, getattr(args, "columns_file", None)]
+    check_output(args.out, kind="dir", inputs=inputs, legacy=legacy_report)  # before the work
+    if args.save_model is not None:
+        check_model_path(args.save_model, option="--save-model", inputs=[*inputs, args.out])
     vehicle = vehicle_from_args(args)
     trips, traces, rejected = read_trips(args.measured, args, measured=True, vehicle=vehicle)
     measured = MeasuredTrips(trips, traces, rejected)

@@ -29,5 +29,5 @@ def run(args: argparse.Namespace) -> int:
             bar.update(1)
 
         run_demo(args.out, seed=args.seed, quick=args.quick, stage=stage,
-                 echo=lambda s: bar.write(s) if not args.quiet else print(s))
+                 echo=lambda s: bar.write(s) if not args.quiet else print(s), option="--out")
     return 0

@@ -12,7 +12,6 @@ import argparse
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
-    check_dir_out,
     hint_missing_soc,
     read_trips,
     report_rejected,
@@ -62,8 +61,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from hybridev.core.progress import progress_bar
     from hybridev.learning.model import HybridModel
+    from hybridev.learning.persist import check_model_path
 
-    check_dir_out("--out", args.out)
+    check_model_path(args.out, option="--out",
+                     inputs=[args.measured, args.timeseries,
+                             getattr(args, "columns_file", None)])  # before the work
     vehicle = vehicle_from_args(args)
     if args.skip_bad_rows or args.timeseries is not None:
         table, traces, rejected = read_trips(args.measured, args, measured=True,

@@ -8,7 +8,6 @@ from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
     apply_columns,
-    check_table_out,
     column_mapping,
     fill_soc_initial,
     model_with_vehicle,
@@ -53,9 +52,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.charging.plan import plan_charging
     from hybridev.core.fileio import read_table, write_table
+    from hybridev.core.outputs import TABLE_SUFFIXES, check_output
 
-    check_table_out("--out", args.out)
-    check_table_out("--trips-out", args.trips_out)
+    inputs = [args.schedule, args.tariff, args.model, getattr(args, "columns_file", None)]
+    check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=inputs)
+    if args.trips_out:
+        check_output(args.trips_out, option="--trips-out", suffixes=TABLE_SUFFIXES,
+                     inputs=[*inputs, args.out])
     schedule = apply_columns(read_table(args.schedule), column_mapping(args),
                              what=str(args.schedule), strict=False)
     schedule = fill_soc_initial(schedule, args.soc_initial)
@@ -75,6 +78,6 @@ def run(args: argparse.Namespace) -> int:
     write_table(result.plan, args.out)
     print(f"wrote {len(result.plan)} slots to {args.out}")
     if args.trips_out:
-        write_table(result.trips, args.trips_out)
+        write_table(result.trips, args.trips_out, option="--trips-out")
         print(f"wrote {len(result.trips)} trips to {args.trips_out}")
     return 0

@@ -20,7 +20,6 @@ import argparse
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
-    check_table_out,
     model_with_vehicle,
     read_trips,
     report_rejected,
@@ -52,11 +51,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from hybridev.cli.inputs import hint_missing_soc
     from hybridev.core.fileio import write_table
+    from hybridev.core.outputs import TABLE_SUFFIXES, check_output
     from hybridev.learning.model import HybridModel
 
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
-    check_table_out("--out", args.out)
+    check_output(args.out, suffixes=TABLE_SUFFIXES,
+                 inputs=[args.model, args.trips, args.timeseries,
+                         getattr(args, "columns_file", None)])
     model = model_with_vehicle(HybridModel.load(args.model), args)
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)

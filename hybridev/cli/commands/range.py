@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 import warnings
-from pathlib import Path
 
 from hybridev.cli.inputs import add_vehicle_arguments, model_with_vehicle, vehicle_from_args
 
@@ -51,15 +50,17 @@ def run(args: argparse.Namespace) -> int:
         _check("--hour", args.hour, 0.0, 24.0, hi_open=True)
     if args.grade is not None:
         _check("--grade", args.grade, -30.0, 30.0)
-    if args.plot is not None and Path(args.plot).suffix.lower() not in _PLOT_SUFFIXES:
-        raise ValueError(f"--plot={args.plot!r} must end in one of {list(_PLOT_SUFFIXES)}")
+    if args.plot is not None:
+        from hybridev.core.outputs import check_output
+
+        check_output(args.plot, option="--plot", suffixes=_PLOT_SUFFIXES, inputs=[args.model])
 
     import pandas as pd
 
     from hybridev.apps.range import predict_range
     from hybridev.apps.range_plot import plot_soc_fan, soc_fan
     from hybridev.core.errors import PhysicsFallbackWarning
-    from hybridev.core.fileio import atomic_path
+    from hybridev.core.outputs import save_figure
     from hybridev.learning.model import HybridModel
 
     row = {"avg_speed_kmh": args.speed, "mode": args.mode, "temperature_c": args.temp}
@@ -98,8 +99,6 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         fig = plot_soc_fan(fan, soc_reserve=args.reserve, ranges=out if fitted else None,
                            title=f"SoC fan: {what}")
-        suffix = Path(args.plot).suffix.lower().lstrip(".")
-        with atomic_path(args.plot) as tmp:
-            fig.savefig(tmp, format=suffix, dpi=120)
+        save_figure(fig, args.plot, option="--plot", dpi=120)
         print(f"wrote fan chart to {args.plot}")
     return 0

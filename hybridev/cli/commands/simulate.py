@@ -8,7 +8,6 @@ ground truth), which ``hybridev fit`` and ``hybridev calibrate`` accept.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from hybridev.cli.inputs import add_vehicle_arguments, vehicle_from_args
@@ -34,19 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def check_out_path(out: str) -> Path:
     """Fail early, before any work, if ``out`` cannot be written as a table."""
-    path = Path(out)
-    if path.suffix.lower() not in _SUFFIXES:
-        raise ValueError(f"--out={out!r} must end in one of {list(_SUFFIXES)}")
-    if path.is_dir():
-        raise ValueError(f"--out={out!r} is a directory; give a file name")
-    anc = path.parent
-    while not anc.exists() and anc != anc.parent:
-        anc = anc.parent
-    if not anc.is_dir():
-        raise ValueError(f"--out={out!r} is not writable: {str(anc)!r} is not a directory")
-    if not os.access(anc, os.W_OK | os.X_OK):
-        raise ValueError(f"--out={out!r} is not writable: no write permission in {str(anc)!r}")
-    return path
+    from hybridev.core.outputs import check_output
+
+    return check_output(out, option="--out", suffixes=_SUFFIXES)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,16 +50,13 @@ def run(args: argparse.Namespace) -> int:
 
         out = make_dataset(args.n_trips, truth=args.truth, seed=args.seed, vehicle=vehicle,
                            n_steps=args.n_steps)
-        write_table(out, args.out)
+        write_table(out, args.out, option="--out")
         print(f"wrote {len(out)} measured trips ({args.truth} truth) to {args.out}")
         return 0
     trips = make_trips(args.n_trips, seed=args.seed)
     with progress_bar(total=len(trips), unit="trip", desc="simulate", quiet=args.quiet) as bar:
         out = simulate(trips, vehicle, n_steps=args.n_steps, seed=args.seed,
                        progress=bar.update_to)
-    try:
-        write_table(out, args.out)
-    except OSError as exc:
-        raise ValueError(f"--out={args.out!r} could not be written: {exc}") from exc
+    write_table(out, args.out, option="--out")  # ValueError naming --out on failure
     print(f"wrote {len(out)} trips to {args.out}")
     return 0

@@ -1,0 +1,98 @@
+"""Temporary paths removed on error and on SIGINT/SIGTERM (used by :mod:`hybridev.core.outputs`).
+
+:func:`guard` registers a clean-up action for the duration of a ``with``
+block. While any is registered, SIGTERM and SIGINT handlers (main thread only)
+run every pending action, restore the previous handler and re-deliver the
+signal, so the process ends as it would have, minus the temporary files.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import shutil
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+__all__ = ["guard", "remove_path"]
+
+_PENDING: dict[int, Callable[[], None]] = {}
+_PREVIOUS: dict[int, object] = {}
+_LOCK = threading.RLock()
+_COUNTER = itertools.count()
+_SIGNALS = tuple(s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGINT", None))
+                 if s is not None)
+
+
+def _cleanup_all() -> None:
+    with _LOCK:
+        actions = list(_PENDING.values())[::-1]
+        _PENDING.clear()
+    for act in actions:
+        with contextlib.suppress(Exception):
+            act()
+
+
+def _on_signal(signum, frame) -> None:
+    _cleanup_all()
+    prev = _PREVIOUS.pop(signum, signal.SIG_DFL)
+    with contextlib.suppress(ValueError, TypeError):
+        signal.signal(signum, prev)
+    if callable(prev):
+        prev(signum, frame)  # e.g. KeyboardInterrupt for SIGINT
+    else:
+        os.kill(os.getpid(), signum)  # the default action, with the usual exit status
+
+
+def _install() -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in _SIGNALS:
+        if s in _PREVIOUS:
+            continue
+        cur = signal.getsignal(s)
+        if cur in (signal.SIG_IGN, None) or cur is _on_signal:
+            continue
+        with contextlib.suppress(ValueError, OSError):
+            signal.signal(s, _on_signal)
+            _PREVIOUS[s] = cur
+
+
+def _uninstall() -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s, prev in list(_PREVIOUS.items()):
+        if signal.getsignal(s) is _on_signal:
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(s, prev)
+        _PREVIOUS.pop(s, None)
+
+
+@contextlib.contextmanager
+def guard(cleanup: Callable[[], None]) -> Iterator[None]:
+    """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends."""
+    key = next(_COUNTER)
+    with _LOCK:
+        _PENDING[key] = cleanup
+        _install()
+    try:
+        yield
+    finally:
+        with _LOCK:
+            act = _PENDING.pop(key, None)
+            if not _PENDING:
+                _uninstall()
+        if act is not None:
+            with contextlib.suppress(Exception):
+                act()
+
+
+def remove_path(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    elif os.path.lexists(p):
+        with contextlib.suppress(OSError):
+            os.unlink(p)

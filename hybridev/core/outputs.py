@@ -1,0 +1,400 @@
+"""Safe outputs: every file or folder hybridev writes goes through this module.
+
+The rules (also in the README, section "Safety"):
+
+* **Check before the work.** :func:`check_output` is called by every command
+  and public writer *before* any computation. A bad path raises a
+  :class:`ValueError` naming the option (``--out``, ``--plot``, ...): a
+  missing or non-folder parent that cannot be created, no write permission,
+  a wrong extension for the format, a path that is also an input (or inside
+  an input folder, or a folder holding an input), a file path that is a
+  folder, a folder path that is a file.
+* **Atomic.** Everything is written into a temporary name in the same folder
+  and moved into place with :func:`os.replace` only when complete; on any
+  error, and on SIGINT/SIGTERM, the temporary files are removed and any
+  previous output is left as it was.
+* **Never destroy what we did not write.** A *file* output replaces an
+  existing regular file of that name (the user named it), never a folder or
+  an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
+  model, a report) replaces an existing folder only if it is empty or carries
+  this package's marker :data:`MANIFEST_FILE` listing every file in it (a
+  folder hybridev wrote, and nothing added since). A *merged* folder
+  (``kind="merge_dir"``, ``hybridev demo``) keeps the files the user put
+  there and replaces only the entries hybridev wrote there before.
+
+API
+---
+``check_output(path, option=..., kind="file"|"model_dir"|"dir"|"merge_dir",
+suffixes=..., inputs=[...], names=[...]) -> Path``
+    Validate an output path before the work.
+``atomic_file(path, option=...)``
+    Context manager yielding a temporary path; moved to ``path`` on success.
+``write_table(df, path, option=...)``, ``write_text(text, path, option=...)``,
+``save_figure(fig, path, option=...)``
+    One-call atomic writers (a failed write raises ``ValueError`` naming the option).
+``output_dir(path, option=..., kind=..., manifest=None)``
+    Context manager yielding a temporary folder; on success a manifest with
+    the SHA-256 of every file is added and the folder moved into place.
+``read_manifest(folder)``, ``is_hybridev_dir(folder)``
+    Inspect a folder's marker (from :mod:`hybridev.core.manifest`).
+
+Clean-up on signals lives in :mod:`hybridev.core.cleanup`; safe ``.npz``
+reading in :mod:`hybridev.core.npz`. Callers that add inputs or outputs (new
+CLI options) pass every input path to ``inputs=`` and call
+:func:`check_output` before reading anything large.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+from hybridev.core.cleanup import guard, remove_path
+from hybridev.core.manifest import (
+    MANIFEST_FILE,
+    foreign_files,
+    is_hybridev_dir,
+    read_manifest,
+    sha256_file,
+    write_manifest,
+)
+
+__all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "TABLE_SUFFIXES", "atomic_file",
+           "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
+           "sha256_file", "write_table", "write_text"]
+
+TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+_KINDS = ("file", "model_dir", "dir", "merge_dir")
+
+
+# -- checks -----------------------------------------------------------------------------------
+# A new folder named like a file is almost always a mistake (``--out model.csv``).
+_FILE_LIKE_SUFFIXES = (".csv", ".parquet", ".pq", ".json", ".html", ".xlsx", ".png", ".pdf",
+                       ".svg", ".txt")
+
+def _resolve(p: str | os.PathLike) -> Path:
+    return Path(os.path.abspath(os.path.expanduser(os.fspath(p))))
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    try:
+        child.relative_to(parent)
+    except ValueError:
+        return False
+    return True
+
+
+def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = "file",
+                 suffixes: Iterable[str] | None = None,
+                 inputs: Iterable[str | os.PathLike | None] = (),
+                 names: Iterable[str] = (),
+                 legacy: Callable[[Path], bool] | None = None) -> Path:
+    """Check an output path before any work; return it as an absolute :class:`~pathlib.Path`.
+
+    Parameters
+    ----------
+    path : path-like
+        The output file or folder.
+    option : str
+        Name shown in the error (``"--out"``, ``"--plot"``, ``"path"``).
+    kind : {"file", "model_dir", "dir", "merge_dir"}
+        ``file``: a single file (an existing regular file is replaced).
+        ``model_dir``/``dir``: a folder replaced as a whole, allowed only when
+        absent, empty or written by hybridev (:data:`MANIFEST_FILE`).
+        ``merge_dir``: a folder into which the entries ``names`` are written;
+        other files in it are kept, and each of ``names`` that exists must have
+        been written there by hybridev.
+    suffixes : iterable of str, optional
+        Allowed extensions of a file (case-insensitive).
+    inputs : iterable of path-like
+        Input files or folders of the same run; the output may not be one of
+        them, lie inside one, or (for folders) hold one.
+    names : iterable of str
+        For ``merge_dir``: the top-level entries that will be written.
+    legacy : callable, optional
+        ``legacy(folder) -> bool``: recognises a folder written by an older
+        hybridev without a manifest (e.g. a model of format version 1).
+
+    Raises
+    ------
+    ValueError
+        Naming ``option``, the path and the reason.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> check_output(d / "p.csv", suffixes=TABLE_SUFFIXES).name
+    'p.csv'
+    >>> check_output(d / "p.xlsx", suffixes=TABLE_SUFFIXES)
+    Traceback (most recent call last):
+    ...
+    ValueError: --out=... must end in one of ['.csv', '.parquet', '.pq']; got '.xlsx'
+    """
+    if kind not in _KINDS:
+        raise ValueError(f"kind={kind!r}; allowed: {list(_KINDS)}")
+    raw = os.fspath(path) if isinstance(path, str | os.PathLike) else path
+    if not isinstance(raw, str) or raw.strip() == "":
+        raise ValueError(f"{option}={path!r} must be a non-empty path")
+    if "\0" in raw:
+        raise ValueError(f"{option}={raw!r} contains a NUL character")
+    p = _resolve(raw)
+    what = f"{option}={raw!r}"
+    rp = Path(os.path.realpath(p))
+    for inp in inputs:
+        if inp is None:
+            continue
+        q = Path(os.path.realpath(_resolve(inp)))
+        same = q == rp or (q.exists() and p.exists() and os.path.samefile(q, p))
+        if same:
+            raise ValueError(f"{what} is also an input of this run; hybridev never writes "
+                             "over its input: choose another path")
+        if kind != "file" and _inside(q, rp):
+            raise ValueError(f"{what} holds the input {str(inp)!r}; choose another path")
+        if q.is_dir() and _inside(rp, q):
+            raise ValueError(f"{what} lies inside the input folder {str(inp)!r}; choose "
+                             "another path")
+    if kind == "file":
+        if raw.endswith(("/", os.sep)) or p.is_dir():
+            raise ValueError(f"{what} is a directory; give a file name")
+        if suffixes is not None:
+            allowed = [s.lower() for s in suffixes]
+            if p.suffix.lower() not in allowed:
+                raise ValueError(f"{what} must end in one of {allowed}; got "
+                                 f"{p.suffix or 'no extension'!r}")
+        if os.path.lexists(p) and not p.is_file():
+            raise ValueError(f"{what} exists and is not a regular file")
+    else:
+        if os.path.lexists(p) and not p.is_dir():
+            raise ValueError(f"{what} exists and is not a folder; hybridev never replaces a "
+                             "file with a folder: choose another path")
+        if p.is_dir() and p.is_symlink():
+            raise ValueError(f"{what} is a symbolic link; give the real folder")
+        if p.is_dir() and kind in ("model_dir", "dir") and _inside(Path(os.getcwd()), rp):
+            raise ValueError(f"{what} is the current folder (or holds it); it would be "
+                             "replaced as a whole: give a new folder name")
+        if p.is_dir() and kind in ("model_dir", "dir"):
+            doc = read_manifest(p) or {}
+            other = doc.get("kind", kind)
+            if other != kind:
+                what_is = ("a saved model" if other == "model_dir"
+                           else f"a hybridev {doc.get('content', 'output')} folder")
+                raise ValueError(f"{what} holds {what_is}, not this kind of output; "
+                                 "hybridev refuses to replace it: give a new folder name")
+            bad = foreign_files(p, legacy)
+            if bad:
+                raise ValueError(
+                    f"{what} is an existing folder with files hybridev did not write there "
+                    f"(e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
+                    "give a new folder name")
+        if p.is_dir() and kind == "merge_dir":
+            doc = read_manifest(p)
+            old = doc is None and legacy is not None and legacy(p)
+            listed = set(names) if old else set((doc or {"files": {}})["files"])
+            for name in names:
+                q = p / name
+                if not os.path.lexists(q):
+                    continue
+                ours = name in listed and (not q.is_dir() or old or not foreign_files(q))
+                if not ours:
+                    raise ValueError(f"{what}: {str(q)!r} exists and was not written there by "
+                                     "hybridev; move it away or choose another folder")
+    anc = p.parent
+    while not os.path.lexists(anc) and anc != anc.parent:
+        anc = anc.parent
+    if not anc.is_dir():
+        raise ValueError(f"{what} is not writable: {str(anc)!r} is not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise ValueError(f"{what} is not writable: no write permission in {str(anc)!r}")
+    if kind != "file" and not p.exists() and p.suffix.lower() in _FILE_LIKE_SUFFIXES:
+        raise ValueError(f"{what} looks like a file name ({p.suffix!r}); this output is a "
+                         "folder: give a folder name")
+    return p
+
+
+def _could_not(option: str, path, exc: BaseException) -> ValueError:
+    return ValueError(f"{option}={os.fspath(path)!r} could not be written: {exc}")
+
+
+# -- writers ----------------------------------------------------------------------------------
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[Path]:
+    """Yield a temporary file path in the target's folder; moved to ``path`` on success.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> with atomic_file(d / "a.txt") as tmp:
+    ...     _ = tmp.write_text("hi")
+    >>> (d / "a.txt").read_text(), sorted(p.name for p in d.iterdir())
+    ('hi', ['a.txt'])
+    """
+    path = _resolve(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        os.chmod(tmp, 0o644)  # mkstemp makes it private; the result is an ordinary file
+    except OSError as exc:
+        raise _could_not(option, path, exc) from exc
+    tmp = Path(tmp)
+    with guard(lambda: remove_path(tmp)):
+        try:
+            yield tmp
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+
+
+def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
+    """Write a DataFrame as CSV or Parquet (by suffix), atomically.
+
+    Examples
+    --------
+    >>> import tempfile, pandas as pd
+    >>> d = Path(tempfile.mkdtemp())
+    >>> write_table(pd.DataFrame({"a": [1]}), d / "t.csv")
+    >>> (d / "t.csv").read_text().split()
+    ['a', '1']
+    """
+    with atomic_file(path, option=option) as tmp:
+        if Path(path).suffix.lower() in (".parquet", ".pq"):
+            df.to_parquet(tmp, index=False)
+        else:
+            df.to_csv(tmp, index=False)
+
+
+def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:
+    """Write UTF-8 text (JSON, HTML, Markdown), atomically.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> write_text("{}", d / "s.json")
+    >>> (d / "s.json").read_text()
+    '{}'
+    """
+    with atomic_file(path, option=option) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def save_figure(fig, path: str | os.PathLike, *, option: str = "--plot", **kwargs) -> None:
+    """Save a matplotlib figure atomically, in the format given by the suffix."""
+    fmt = Path(path).suffix.lower().lstrip(".") or None
+    with atomic_file(path, option=option) as tmp:
+        fig.savefig(tmp, format=fmt, **kwargs)
+
+
+@contextlib.contextmanager
+def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "dir",
+               manifest: dict | None = None, inputs: Iterable = (),
+               legacy: Callable[[Path], bool] | None = None) -> Iterator[Path]:
+    """Yield a temporary folder that becomes ``path`` on success, with a manifest.
+
+    ``kind="model_dir"`` or ``"dir"``: ``path`` is replaced as a whole (allowed
+    only as :func:`check_output` says). ``kind="merge_dir"``: each top-level
+    entry of the temporary folder replaces the entry of that name in ``path``
+    (checked the same way); other files in ``path`` are kept. ``manifest``:
+    extra fields of :data:`MANIFEST_FILE` (e.g. a format version).
+
+    The check is repeated at the start, so a direct caller is protected too.
+    On error or SIGINT/SIGTERM nothing is left behind and ``path`` is unchanged
+    (a signal in the middle of the final swap restores the previous folder).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> with output_dir(d / "m", kind="model_dir") as tmp:
+    ...     _ = (tmp / "x.txt").write_text("1")
+    >>> sorted(p.name for p in (d / "m").iterdir())
+    ['hybridev-manifest.json', 'x.txt']
+    """
+    info = {"kind": kind, **(manifest or {})}
+    if kind == "merge_dir":
+        target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
+        yield from _merge(target, option, info, legacy)
+        return
+    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp",
+                                    dir=target.parent))
+        tmp.chmod(0o755)
+    except OSError as exc:
+        raise _could_not(option, path, exc) from exc
+    old = target.with_name(f".{target.name}.{os.getpid()}.old")
+    state = {"moved_old": False}
+
+    def cleanup() -> None:
+        if state["moved_old"] and not os.path.lexists(target) and old.exists():
+            os.replace(old, target)  # interrupted mid-swap: put the previous folder back
+        elif state["moved_old"]:
+            remove_path(old)
+        remove_path(tmp)
+
+    with guard(cleanup):
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+        try:
+            write_manifest(tmp, info)
+            check_output(target, option=option, kind=kind, legacy=legacy)  # still replaceable
+            if target.exists():
+                remove_path(old)
+                os.replace(target, old)
+                state["moved_old"] = True
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
+
+
+def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
+    created = not os.path.lexists(target)
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".hybridev.", suffix=".tmp", dir=target))
+        tmp.chmod(0o755)
+    except OSError as exc:
+        raise _could_not(option, target, exc) from exc
+
+    def cleanup() -> None:
+        remove_path(tmp)
+        if created and not (target / MANIFEST_FILE).exists():
+            with contextlib.suppress(OSError):
+                target.rmdir()  # only if still empty
+
+    with guard(cleanup):
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _could_not(option, target, exc) from exc
+        names = sorted(p.name for p in tmp.iterdir())
+        check_output(target, option=option, kind="merge_dir", names=names, legacy=legacy)
+        old_doc = read_manifest(target) or {"files": {}}
+        try:
+            for name in names:
+                src, dst = tmp / name, target / name
+                if src.is_dir():
+                    if dst.exists():
+                        remove_path(dst)
+                    os.replace(src, dst)
+                else:
+                    os.replace(src, dst)
+            keep = {k: v for k, v in old_doc["files"].items() if os.path.lexists(target / k)}
+            files = dict(keep)
+            for name in names:
+                files[name] = "folder" if (target / name).is_dir() else sha256_file(target / name)
+            doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
+            with atomic_file(target / MANIFEST_FILE, option=option) as mtmp:
+                mtmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        except OSError as exc:
+            raise _could_not(option, target, exc) from exc
