@@ -15,7 +15,10 @@ Per interval:
 * regeneration ``P_r = eta_r * max(-P_w, 0)``: only a fraction of the
   *negative wheel power* returns to the battery, never more than the braking
   energy that was available;
-* auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``;
+* auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``; with the continuous climate
+  model (:mod:`hybridev.physics.thermal`) ``P_c`` is the steady climate power,
+  the trip's warm-up energy is spread evenly over its duration, and the
+  cold-weather factors scale ``mult`` and ``eta_r``;
 * battery power ``P = P_t + P_a - P_r``, energy ``E = sum(P dt) / 3600`` kWh.
 
 Every function is vectorised over leading trip axes: ``speed_mps`` is
@@ -28,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybridev.physics.climate import _profile_values, hvac_power_kw
+from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
 
 __all__ = [
@@ -138,14 +142,25 @@ def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> n
 
 
 def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
-                   v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column."""
+                   v: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column.
+
+    With the continuous climate model the cold-weather factors scale ``mult``
+    and ``eta_r``, and the warm-up energy is spread evenly over the trip as
+    extra auxiliary power.
+    """
     n_trips = v.shape[0] if v.ndim == 2 else None
     mult, eta_r, mode_kw = _profile_values(profile, n_trips)
     t = _per_trip(temperature_c, v, "temperature_c")
     aux = veh.aux_base_kw + hvac_power_kw(t, veh) + _per_trip(mode_kw, v, "profile")
-    return (_per_trip(mult, v, "profile") / veh.drivetrain_efficiency,
-            _per_trip(eta_r, v, "profile"), aux)
+    mult = _per_trip(mult, v, "profile")
+    eta_r = _per_trip(eta_r, v, "profile")
+    if veh.climate_model == "continuous":
+        trac, regen = cold_factors(t, veh)
+        mult, eta_r = mult * trac, eta_r * regen
+        dur_s = dt * (v.shape[-1] - 1)
+        aux = aux + warmup_energy_kwh(t, dur_s, veh) / (dur_s / 3600.0)
+    return mult / veh.drivetrain_efficiency, eta_r, aux
 
 
 def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -210,7 +225,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
     pw = _wheel_power_w(v, dt, veh, th)
     pw *= 1e-3
     out = np.maximum(pw, 0.0) * mult_eta
@@ -256,7 +271,7 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
     return _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
 
 

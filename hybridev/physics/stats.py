@@ -3,6 +3,7 @@
 The battery energy of a trace (:mod:`hybridev.physics.forces`) is
 
     E = mult / eta_d * sum_{P_w > 0} P_w dt + s eta_r * sum_{P_w < 0} P_w dt + (P_b + h P_c + P_m) T
+        + w E_warm
 
 with wheel power ``P_w = (C_r m g cos(theta) + b v + rho C_dA v^2 / 2 + m g sin(theta) + m a) v``.
 For a *fixed* split of the intervals into driving (``P_w > 0``) and braking
@@ -14,7 +15,10 @@ the HVAC scale ``h`` (1 nominally), so per trip and per sign it suffices to keep
 * ``lin = sum v^2 dt`` (per N/(m/s) of ``b``),
 * ``rest = sum (m g sin(theta) + m a) v dt`` (grade and inertia),
 
-all in kWh, plus the duration ``T`` and the HVAC and mode powers. Then
+all in kWh, plus the duration ``T``, the HVAC and mode powers and the warm-up
+energy ``E_warm`` (``w`` = ``warmup_scale``, 1 nominally; zero for the paper's
+climate model). The cold-weather factors of the continuous climate model are
+folded into ``mult`` and ``eta_r``. Then
 :func:`energy_from_stats` evaluates thousands of parameter draws against all
 trips in one broadcast.
 
@@ -61,7 +65,8 @@ __all__ = [
 ]
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
-               "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale")
+               "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale",
+               "warmup_scale")
 """Parameters :func:`energy_from_stats` can vary."""
 
 _J_PER_KWH = 3.6e6
@@ -93,6 +98,12 @@ class PhysicsStats:
         Vehicle that fixed the sign split; default values of the parameters.
     max_speed_kmh : numpy.ndarray, shape (n_rows,), km/h, optional
         Highest speed of each row's trace.
+    warmup_kwh : numpy.ndarray, shape (n_rows,), kWh, optional
+        Cabin (and battery) warm-up energy at the trip's start
+        (:func:`hybridev.physics.thermal.warmup_energy_kwh`; ``warmup_scale``
+        multiplies it); zero for the paper's climate model. With the
+        continuous model ``hvac_kw`` is the trip's mean steady climate power
+        and ``mult``/``eta_r`` include the cold-weather factors.
     """
 
     roll_pos: np.ndarray
@@ -113,6 +124,11 @@ class PhysicsStats:
     n_trips: int
     vehicle: VehicleParams
     max_speed_kmh: np.ndarray | None = None
+    warmup_kwh: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.warmup_kwh is None:
+            object.__setattr__(self, "warmup_kwh", np.zeros(len(self.trip)))
 
     @property
     def n_rows(self) -> int:
@@ -124,16 +140,16 @@ class PhysicsStats:
         return self.n_rows != self.n_trips
 
     def features(self) -> np.ndarray:
-        """Design matrix ``(11, n_rows)`` with ``E = coefficients @ features`` (kWh).
+        """Design matrix ``(12, n_rows)`` with ``E = coefficients @ features`` (kWh).
 
         The matching coefficients are ``[C_r/eta_d, C_dA/eta_d, b/eta_d, 1/eta_d,
-        s C_r, s C_dA, s b, s, P_b, hvac_scale, 1]``.
+        s C_r, s C_dA, s b, s, P_b, hvac_scale, 1, warmup_scale]``.
         """
         return np.stack([
             self.mult * self.roll_pos, self.mult * self.aero_pos, self.mult * self.lin_pos,
             self.mult * self.rest_pos, self.eta_r * self.roll_neg, self.eta_r * self.aero_neg,
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
-            self.hvac_kw * self.duration_h, self.mode_kw * self.duration_h])
+            self.hvac_kw * self.duration_h, self.mode_kw * self.duration_h, self.warmup_kwh])
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -156,7 +172,7 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
     vals = {"drag_area_m2": v.drag_area_m2, "rolling_resistance_coef": v.rolling_resistance_coef,
             "linear_drag_n_per_mps": v.linear_drag_n_per_mps,
             "drivetrain_efficiency": v.drivetrain_efficiency, "aux_base_kw": v.aux_base_kw,
-            "regen_scale": 1.0, "hvac_scale": 1.0}
+            "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0}
     if isinstance(params, VehicleParams):
         params = {"drag_area_m2": params.drag_area_m2,
                   "rolling_resistance_coef": params.rolling_resistance_coef,
@@ -186,7 +202,7 @@ def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
     cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
     s = p["regen_scale"]
     coef = (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
-            p["hvac_scale"], np.ones(()))
+            p["hvac_scale"], np.ones(()), p["warmup_scale"])
     shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
     if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
@@ -196,7 +212,7 @@ def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
             + stats.eta_r * p["regen_scale"] * (cr * stats.roll_neg + cda * stats.aero_neg
                                                + b * stats.lin_neg + stats.rest_neg)
             + (p["aux_base_kw"] + p["hvac_scale"] * stats.hvac_kw + stats.mode_kw)
-            * stats.duration_h)
+            * stats.duration_h + p["warmup_scale"] * stats.warmup_kwh)
 
 
 def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
@@ -210,8 +226,9 @@ def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
         trips, e.g. shape ``(n_draws, 1)``. Missing ones take their value in
         ``stats.vehicle`` (``regen_scale``, ``hvac_scale``: 1). A
         VehicleParams supplies ``C_dA``, ``C_r``, ``b``, ``eta_d`` and
-        ``P_b``; mass, HVAC bands and air density always come from the
-        statistics.
+        ``P_b``; mass, climate model and air density always come from the
+        statistics (``hvac_scale`` and ``warmup_scale`` rescale their climate
+        terms).
 
     Returns
     -------
