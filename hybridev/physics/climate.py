@@ -40,7 +40,7 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
     >>> hvac_power_kw([-5, 10, 20, 25, 32]).tolist()
     [2.0, 1.0, 0.5, 0.5, 2.5]
     >>> hvac_power_kw([-5, 10, 20], VehicleParams(climate_model="continuous")).round(2).tolist()
-    [2.86, 1.21, 0.11]
+    [2.46, 0.81, 0.0]
     """
     v = vehicle or VehicleParams()
     t = np.asarray(temperature_c, dtype=float)

@@ -60,13 +60,14 @@ from hybridev.physics.params import VehicleParams
 __all__ = [
     "STAT_PARAMS",
     "PhysicsStats",
+    "coefficients",
     "energy_from_stats",
     "row_energy",
 ]
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
                "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale",
-               "warmup_scale")
+               "warmup_scale", "heating_scale", "cooling_scale")
 """Parameters :func:`energy_from_stats` can vary."""
 
 _J_PER_KWH = 3.6e6
@@ -104,6 +105,10 @@ class PhysicsStats:
         multiplies it); zero for the paper's climate model. With the
         continuous model ``hvac_kw`` is the trip's mean steady climate power
         and ``mult``/``eta_r`` include the cold-weather factors.
+    cooling_kw : numpy.ndarray, shape (n_rows,), kW, optional
+        The cooling (A/C) part of ``hvac_kw``; the rest is heating.
+        ``cooling_scale`` and ``heating_scale`` multiply the two parts
+        (zero for the paper's bands, which ``heating_scale`` then scales).
     """
 
     roll_pos: np.ndarray
@@ -125,10 +130,12 @@ class PhysicsStats:
     vehicle: VehicleParams
     max_speed_kmh: np.ndarray | None = None
     warmup_kwh: np.ndarray | None = None
+    cooling_kw: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if self.warmup_kwh is None:
-            object.__setattr__(self, "warmup_kwh", np.zeros(len(self.trip)))
+        for name in ("warmup_kwh", "cooling_kw"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(len(self.trip)))
 
     @property
     def n_rows(self) -> int:
@@ -140,16 +147,18 @@ class PhysicsStats:
         return self.n_rows != self.n_trips
 
     def features(self) -> np.ndarray:
-        """Design matrix ``(12, n_rows)`` with ``E = coefficients @ features`` (kWh).
+        """Design matrix ``(13, n_rows)`` with ``E = coefficients @ features`` (kWh).
 
         The matching coefficients are ``[C_r/eta_d, C_dA/eta_d, b/eta_d, 1/eta_d,
-        s C_r, s C_dA, s b, s, P_b, hvac_scale, 1, warmup_scale]``.
+        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool]`` with
+        ``h`` = ``hvac_scale`` (:func:`coefficients`).
         """
         return np.stack([
             self.mult * self.roll_pos, self.mult * self.aero_pos, self.mult * self.lin_pos,
             self.mult * self.rest_pos, self.eta_r * self.roll_neg, self.eta_r * self.aero_neg,
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
-            self.hvac_kw * self.duration_h, self.mode_kw * self.duration_h, self.warmup_kwh])
+            (self.hvac_kw - self.cooling_kw) * self.duration_h, self.mode_kw * self.duration_h,
+            self.warmup_kwh, self.cooling_kw * self.duration_h])
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -172,7 +181,8 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
     vals = {"drag_area_m2": v.drag_area_m2, "rolling_resistance_coef": v.rolling_resistance_coef,
             "linear_drag_n_per_mps": v.linear_drag_n_per_mps,
             "drivetrain_efficiency": v.drivetrain_efficiency, "aux_base_kw": v.aux_base_kw,
-            "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0}
+            "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0,
+            "heating_scale": 1.0, "cooling_scale": 1.0}
     if isinstance(params, VehicleParams):
         params = {"drag_area_m2": params.drag_area_m2,
                   "rolling_resistance_coef": params.rolling_resistance_coef,
@@ -192,27 +202,32 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
     return vals
 
 
+def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
+    """The 13 coefficients of :meth:`PhysicsStats.features` from parameter values.
+
+    ``p`` maps every name of :data:`STAT_PARAMS` to a scalar or array; the
+    entries broadcast together.
+    """
+    inv = 1.0 / p["drivetrain_efficiency"]
+    cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
+    s, h = p["regen_scale"], p["hvac_scale"]
+    return (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
+            h * p["heating_scale"], np.ones_like(inv), p["warmup_scale"],
+            h * p["cooling_scale"])
+
+
 def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
     """Energy of every row (trip, or trip and mode), shape ``broadcast(params) + (n_rows,)``, kWh.
 
     Same parameters as :func:`energy_from_stats`, without the mixture mean.
     """
     p = _param_values(stats, params)
-    inv = 1.0 / p["drivetrain_efficiency"]
-    cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
-    s = p["regen_scale"]
-    coef = (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
-            p["hvac_scale"], np.ones(()), p["warmup_scale"])
+    coef = coefficients(p)
     shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
     if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
         return (c[..., 0, :] if shape else c) @ stats.features()
-    return (stats.mult * inv * (cr * stats.roll_pos + cda * stats.aero_pos + b * stats.lin_pos
-                                + stats.rest_pos)
-            + stats.eta_r * p["regen_scale"] * (cr * stats.roll_neg + cda * stats.aero_neg
-                                               + b * stats.lin_neg + stats.rest_neg)
-            + (p["aux_base_kw"] + p["hvac_scale"] * stats.hvac_kw + stats.mode_kw)
-            * stats.duration_h + p["warmup_scale"] * stats.warmup_kwh)
+    return sum(c * f for c, f in zip(coef, stats.features(), strict=True))
 
 
 def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:

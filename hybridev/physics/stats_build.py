@@ -13,7 +13,7 @@ from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.kinematics import profile_table
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
-from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
+from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
 from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import _blocks
 
@@ -43,7 +43,7 @@ def _profile_consts(profile, n: int):
 
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
-              start_temperature_c=None) -> PhysicsStats:
+              start_temperature_c=None, cooling_kw=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
@@ -56,7 +56,9 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
     hvac = np.broadcast_to(hvac_power_kw(t, veh) if climate_kw is None else climate_kw, (n,))
     duration_s = np.asarray(duration_s, float)
     warm = np.zeros(n)
+    cool = np.zeros(n)
     if veh.climate_model == "continuous":
+        cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
         t0 = t if start_temperature_c is None else start_temperature_c
@@ -69,7 +71,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
         log_weight=np.zeros(n) if log_weight is None else log_weight,
         n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
-        warmup_kwh=warm)
+        warmup_kwh=warm, cooling_kw=cool)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -219,24 +221,29 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     vmax = np.zeros(n)
     np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
+    heat, cool = _logged_climate_kw(traces, veh, start, trip, dt)
     return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
-                     climate_kw=_logged_climate_kw(traces, veh, start, trip, dt))
+                     climate_kw=None if heat is None else heat + cool, cooling_kw=cool)
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
-    """Time-mean steady climate power of each trip from its per-step temperature, kW.
+    """Time-mean steady (heating, cooling) power of each trip from its per-step temperature, kW.
 
     Only for the continuous climate model and traces with a temperature
-    column; ``None`` otherwise (the trip temperature is then used).
+    column; ``(None, None)`` otherwise (the trip temperature is then used).
     """
     if veh.climate_model != "continuous" or traces.temperature_c is None:
-        return None
+        return None, None
     tt = traces.temperature_c
-    p = hvac_power_kw(0.5 * (tt[start] + tt[start + 1]), veh)
     n = len(traces)
     tot = np.bincount(trip, dt, minlength=n)
-    mean = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
-    return np.where(tot > 0, mean, hvac_power_kw(traces.per_trip_mean(tt), veh))
+    fallback = climate_split_kw(traces.per_trip_mean(tt), veh)
+    out = []
+    for p, fb in zip(climate_split_kw(0.5 * (tt[start] + tt[start + 1]), veh), fallback,
+                     strict=True):
+        mean = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
+        out.append(np.where(tot > 0, mean, fb))
+    return tuple(out)
 
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
@@ -308,6 +315,8 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     log_w = np.where(kn, 0.0, -np.log(n_alt))
     temp = trips["temperature_c"].to_numpy(float)
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
+    cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
+               else np.zeros(len(trip)))
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
     duration = np.zeros(len(trip))
     vmax = np.zeros(len(trip))
@@ -321,6 +330,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         duration[rl] = sl.duration_h[src] * 3600.0
         vmax[rl] = sl.max_speed_kmh[src]
         climate[rl] = sl.hvac_kw[src]
+        cooling[rl] = sl.cooling_kw[src]
     if (~rl).any():
         cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
                 "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
@@ -339,4 +349,4 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             vmax[dest[blk]] = s.max_speed_kmh
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
-                    n_trips=n, max_speed_kmh=vmax, climate_kw=climate)
+                    n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling)
