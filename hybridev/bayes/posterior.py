@@ -145,7 +145,8 @@ class PhysicsPosterior:
                 "linear_drag_n_per_mps": vehicle.linear_drag_n_per_mps,
                 "drivetrain_efficiency": vehicle.drivetrain_efficiency,
                 "aux_base_kw": vehicle.aux_base_kw, "regen_scale": 1.0, "hvac_scale": 1.0,
-                "warmup_scale": 1.0, "heating_scale": 1.0, "cooling_scale": 1.0}
+                "warmup_scale": 1.0, "heating_scale": 1.0, "cooling_scale": 1.0,
+                "drive_loss_kw": vehicle.drive_loss_kw}
 
     @classmethod
     def from_sampler(cls, sampler, names, *, vehicle, reference_vehicle, prior, map_theta,

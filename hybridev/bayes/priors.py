@@ -52,7 +52,8 @@ class PhysicsPrior:
         ``eta_d ~ N(nominal, sd)`` truncated to ``efficiency_bounds`` (open).
     efficiency_bounds : tuple of 2 float
     aux_log_sd : float
-        ``log P_b ~ N(log nominal, sd)``; needs a nominal ``P_b > 0``.
+        ``log P_b ~ N(log nominal, sd)``; needs a nominal ``P_b > 0``. The same
+        for the drive loss ``drive_loss_kw``.
     hvac_log_sd : float
         ``log hvac_scale ~ N(0, sd)``; the scale multiplies the climate power
         (all four HVAC bands, or the continuous model's steady power); the
@@ -123,10 +124,10 @@ class PhysicsPrior:
 
         ``coastdown``: the road load was measured (tighter ``C_dA``, ``C_r``).
         """
-        if name in ("drag_area_m2", "rolling_resistance_coef", "aux_base_kw"):
+        if name in ("drag_area_m2", "rolling_resistance_coef", "aux_base_kw", "drive_loss_kw"):
             sd = {"drag_area_m2": self.drag_area_log_sd,
                   "rolling_resistance_coef": self.rolling_resistance_log_sd,
-                  "aux_base_kw": self.aux_log_sd}[name]
+                  "aux_base_kw": self.aux_log_sd, "drive_loss_kw": self.aux_log_sd}[name]
             if coastdown and name != "aux_base_kw":
                 sd = self.coastdown_log_sd
             if not nominal > 0:

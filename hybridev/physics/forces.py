@@ -18,7 +18,9 @@ Per interval:
 * auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``; with the continuous climate
   model (:mod:`hybridev.physics.thermal`) ``P_c`` is the steady climate power,
   the trip's warm-up energy is spread evenly over its duration, and the
-  cold-weather factors scale ``mult`` and ``eta_r``;
+  cold-weather factors scale ``mult`` and ``eta_r``; the drive loss
+  ``P_d`` (``drive_loss_kw``) is added while the car moves (interval-mean
+  speed above 0.5 m/s);
 * battery power ``P = P_t + P_a - P_r``, energy ``E = sum(P dt) / 3600`` kWh.
 
 Every function is vectorised over leading trip axes: ``speed_mps`` is
@@ -127,6 +129,16 @@ def _wheel_power_w(v: np.ndarray, dt, veh: VehicleParams, th) -> np.ndarray:
     return p
 
 
+MOVING_MPS = 0.5
+"""Interval-mean speed above which the car counts as moving (drive losses), m/s."""
+
+
+def _moving_steps(v: np.ndarray) -> np.ndarray:
+    """Number of moving intervals per trace, shape ``v.shape[:-1] + (1,)``."""
+    vm = v[..., 1:] + v[..., :-1]
+    return np.count_nonzero(vm > 2.0 * MOVING_MPS, axis=-1)[..., None]
+
+
 def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> np.ndarray:
     """Net battery energy (kWh) per trace from wheel power in W; overwrites ``pw_w``.
 
@@ -233,6 +245,8 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     pw *= eta_r  # regeneration, <= 0
     out += pw
     out += aux
+    if veh.drive_loss_kw:
+        out += veh.drive_loss_kw * ((v[..., 1:] + v[..., :-1]) > 2.0 * MOVING_MPS)
     return out
 
 
@@ -272,7 +286,10 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
     mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
-    return _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
+    e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
+    if veh.drive_loss_kw:
+        e = e + (veh.drive_loss_kw * _moving_steps(v) * (dt / 3600.0))[..., 0]
+    return e
 
 
 def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | None = None,

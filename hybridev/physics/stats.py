@@ -67,7 +67,7 @@ __all__ = [
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
                "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale",
-               "warmup_scale", "heating_scale", "cooling_scale")
+               "warmup_scale", "heating_scale", "cooling_scale", "drive_loss_kw")
 """Parameters :func:`energy_from_stats` can vary."""
 
 _J_PER_KWH = 3.6e6
@@ -109,6 +109,9 @@ class PhysicsStats:
         The cooling (A/C) part of ``hvac_kw``; the rest is heating.
         ``cooling_scale`` and ``heating_scale`` multiply the two parts
         (zero for the paper's bands, which ``heating_scale`` then scales).
+    moving_h : numpy.ndarray, shape (n_rows,), h, optional
+        Time with interval-mean speed above 0.5 m/s (``drive_loss_kw``
+        multiplies it).
     """
 
     roll_pos: np.ndarray
@@ -131,9 +134,10 @@ class PhysicsStats:
     max_speed_kmh: np.ndarray | None = None
     warmup_kwh: np.ndarray | None = None
     cooling_kw: np.ndarray | None = None
+    moving_h: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("warmup_kwh", "cooling_kw"):
+        for name in ("warmup_kwh", "cooling_kw", "moving_h"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(len(self.trip)))
 
@@ -147,10 +151,10 @@ class PhysicsStats:
         return self.n_rows != self.n_trips
 
     def features(self) -> np.ndarray:
-        """Design matrix ``(13, n_rows)`` with ``E = coefficients @ features`` (kWh).
+        """Design matrix ``(14, n_rows)`` with ``E = coefficients @ features`` (kWh).
 
         The matching coefficients are ``[C_r/eta_d, C_dA/eta_d, b/eta_d, 1/eta_d,
-        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool]`` with
+        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool, P_d]`` with
         ``h`` = ``hvac_scale`` (:func:`coefficients`).
         """
         return np.stack([
@@ -158,7 +162,7 @@ class PhysicsStats:
             self.mult * self.rest_pos, self.eta_r * self.roll_neg, self.eta_r * self.aero_neg,
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
             (self.hvac_kw - self.cooling_kw) * self.duration_h, self.mode_kw * self.duration_h,
-            self.warmup_kwh, self.cooling_kw * self.duration_h])
+            self.warmup_kwh, self.cooling_kw * self.duration_h, self.moving_h])
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -182,13 +186,13 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
             "linear_drag_n_per_mps": v.linear_drag_n_per_mps,
             "drivetrain_efficiency": v.drivetrain_efficiency, "aux_base_kw": v.aux_base_kw,
             "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0,
-            "heating_scale": 1.0, "cooling_scale": 1.0}
+            "heating_scale": 1.0, "cooling_scale": 1.0, "drive_loss_kw": v.drive_loss_kw}
     if isinstance(params, VehicleParams):
         params = {"drag_area_m2": params.drag_area_m2,
                   "rolling_resistance_coef": params.rolling_resistance_coef,
                   "linear_drag_n_per_mps": params.linear_drag_n_per_mps,
                   "drivetrain_efficiency": params.drivetrain_efficiency,
-                  "aux_base_kw": params.aux_base_kw}
+                  "aux_base_kw": params.aux_base_kw, "drive_loss_kw": params.drive_loss_kw}
     elif params is None:
         params = {}
     elif not isinstance(params, Mapping):
@@ -203,7 +207,7 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
 
 
 def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
-    """The 13 coefficients of :meth:`PhysicsStats.features` from parameter values.
+    """The 14 coefficients of :meth:`PhysicsStats.features` from parameter values.
 
     ``p`` maps every name of :data:`STAT_PARAMS` to a scalar or array; the
     entries broadcast together.
@@ -213,7 +217,7 @@ def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
     s, h = p["regen_scale"], p["hvac_scale"]
     return (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
             h * p["heating_scale"], np.ones_like(inv), p["warmup_scale"],
-            h * p["cooling_scale"])
+            h * p["cooling_scale"], p["drive_loss_kw"])
 
 
 def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.forces import MOVING_MPS, _moving_steps
 from hybridev.physics.kinematics import profile_table
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
@@ -43,7 +44,7 @@ def _profile_consts(profile, n: int):
 
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
-              start_temperature_c=None, cooling_kw=None) -> PhysicsStats:
+              start_temperature_c=None, cooling_kw=None, moving_s=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
@@ -71,7 +72,8 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
         log_weight=np.zeros(n) if log_weight is None else log_weight,
         n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
-        warmup_kwh=warm, cooling_kw=cool)
+        warmup_kwh=warm, cooling_kw=cool,
+        moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -126,7 +128,8 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
-                     max_speed_kmh=v.max(axis=1) * 3.6)
+                     max_speed_kmh=v.max(axis=1) * 3.6,
+                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0])
 
 
 def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
@@ -222,8 +225,11 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     vmax = np.zeros(n)
     np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
     heat, cool = _logged_climate_kw(traces, veh, start, trip, dt)
+    vm = v[start] + v[nxt]
+    moving = np.bincount(trip, np.where(vm > 2.0 * MOVING_MPS, dt, 0.0), minlength=n)
     return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
-                     climate_kw=None if heat is None else heat + cool, cooling_kw=cool)
+                     climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
+                     moving_s=moving)
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
@@ -319,6 +325,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                else np.zeros(len(trip)))
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
     duration = np.zeros(len(trip))
+    moving = np.zeros(len(trip))
     vmax = np.zeros(len(trip))
     rl = logged[trip]
     if rl.any():
@@ -330,6 +337,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         duration[rl] = sl.duration_h[src] * 3600.0
         vmax[rl] = sl.max_speed_kmh[src]
         climate[rl] = sl.hvac_kw[src]
+        moving[rl] = sl.moving_h[src] * 3600.0
         cooling[rl] = sl.cooling_kw[src]
     if (~rl).any():
         cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
@@ -346,7 +354,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
+            moving[dest[blk]] = s.moving_h * 3600.0
             vmax[dest[blk]] = s.max_speed_kmh
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
-                    n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling)
+                    n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
+                    moving_s=moving)

@@ -32,6 +32,7 @@ from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.forces import (
     _battery_energy_kwh,
+    _moving_steps,
     _interval_grade,
     _wheel_power_w,
     soc_trajectory,
@@ -186,6 +187,8 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
         energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
         if warm:
             energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh)
+        if veh.drive_loss_kw:
+            energy[sl] += veh.drive_loss_kw * _moving_steps(v)[:, 0] * dt / 3600.0
         vmax[sl] = v.max(axis=1) * 3.6
         if progress is not None:
             progress(min(sl.stop, n))
