@@ -287,10 +287,11 @@ def _group_codes(trips: pd.DataFrame, groups) -> np.ndarray | None:
                              f"allowed: 'auto', None, a column name or one label per trip")
         labels = trips[groups]
     else:
-        labels = pd.Series(np.asarray(groups, dtype=object), index=trips.index)
-        if len(labels) != len(trips):
-            raise ValueError(f"groups has {len(labels)} labels; allowed: one per measured "
+        arr = np.asarray(groups, dtype=object).reshape(-1)
+        if len(arr) != len(trips):
+            raise ValueError(f"groups has {len(arr)} labels; allowed: one per measured "
                              f"trip ({len(trips)})")
+        labels = pd.Series(arr, index=trips.index)
     codes, _ = pd.factorize(labels.astype(object))
     miss = codes < 0
     codes[miss] = codes.max() + 1 + np.arange(int(miss.sum()))
