@@ -4,7 +4,8 @@ All three predictors run their physics on the logged 1 Hz speed traces.
 
 Run from the repository root::
 
-    python calibration/realtrips_report.py [--report-dir DIR] [--folds 5]
+    python calibration/realtrips_report.py [--data DIR] [--out DIR] [--report-dir DIR]
+                                           [--folds 5]
 
 Builds the measured-trip table and the 1 Hz time series of the 104 real trips
 (see that folder's README; the data are never copied into the repository),
@@ -19,15 +20,16 @@ then
    across folds, and pooled over all held-out trips, for every hybrid
    configuration in :data:`CONFIGS`.
 
-Commits ``calibration/results/realtrips_report.json``, ``.md``,
-``realtrips_report_*.png`` and, when under 1.5 MB, ``realtrips_report.html``.
-Exits 0 with a message when the data are absent.
+Writes ``realtrips_report.json``, ``.md``, ``realtrips_report_*.png`` and, when
+under 1.5 MB, ``realtrips_report.html`` to ``--out`` (default: a new folder
+``realtrips_results`` in the working directory, so that no tracked file is
+overwritten; the committed ``calibration/results`` were made with
+``--out calibration/results``). Exits 0 with a message when the data are absent.
 
-Vehicle, profile and calibrated parameters are those of
-``calibration/realtrips_physics.py`` (documented there): nominal vehicle from
-the README's coast-down coefficients, the profile ``logged`` for the
-(unlabelled) real traces, calibrated ``C_dA``, ``C_r``, ``eta_d``, ``P_b``,
-regen and HVAC scales.
+Settings are the library defaults (see ``calibration/realtrips_physics.py``): the
+vehicle is only ``VehicleParams.from_coastdown(A, B, C, mass_kg=m)``, the models
+run with their default parameters, priors and profile; nothing is taken from the
+data's README.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ from hybridev.data.logs import MeasuredTrips, measured_from_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "realtrips"
-RESULTS = ROOT / "calibration" / "results"
+RESULTS = Path("realtrips_results")
 SEED = 0
 LEVEL = 0.9
 TEST_FRACTION = 0.2
@@ -116,8 +118,7 @@ def load(root: Path = DATA, *, drop_hour: bool = False) -> MeasuredTrips:
 
 def _settings(model_params: dict) -> dict:
     return {"vehicle": VEHICLE, "seed": SEED, "level": LEVEL, "n_members": N_MEMBERS,
-            "group_column": "session_group", "physics_params": PARAMS,
-            "physics_missing_mode": LOGGED, "model_params": model_params}
+            "group_column": "session_group", "model_params": model_params}
 
 
 def _fold_row(s: dict) -> dict:
@@ -220,7 +221,7 @@ def write_outputs(measured: MeasuredTrips, summary: dict, cv: dict, report_dir: 
                       "coverage_90": cov, "coverage_met": cov >= TARGET_COVERAGE_90}
     n_sessions = int(measured.trips["session_group"].nunique())
     out = {
-        "generated_by": "python calibration/realtrips_report.py",
+        "generated_by": f"python calibration/realtrips_report.py --out {RESULTS}",
         "data": summary["data"] | {"n_sessions": n_sessions},
         "assumptions": {"soc_initial": SOC_INITIAL,
                         "battery_capacity_kwh": VEHICLE.battery_capacity_kwh,
@@ -242,7 +243,7 @@ def write_outputs(measured: MeasuredTrips, summary: dict, cv: dict, report_dir: 
         tmp.write_text(json.dumps(jsonable(out), indent=2, allow_nan=False))
     with atomic_path(RESULTS / "realtrips_report.md") as tmp:
         tmp.write_text(_markdown(out, summary, figures, elapsed))
-    print(f"wrote {(RESULTS / 'realtrips_report.md').relative_to(ROOT)} ({elapsed:.0f} s); "
+    print(f"wrote {RESULTS / 'realtrips_report.md'} ({elapsed:.0f} s); "
           f"HTML report in {report_dir} ({html_bytes / 1e6:.2f} MB"
           f"{', copied' if html_committed else ''})")
 
@@ -333,11 +334,11 @@ Full HTML report: {html}.
   {d['n_rejected_timeseries']} traces), each with its reason; they are the trips the source
   flags `no_start_datetime`: a partly missing `hour` is rejected by validation. The variant
   "no hour column" below keeps all trips.
-* **Vehicle and physics**: as in `calibration/realtrips_physics.py` (coast-down
-  A/B/C → C_dA, C_r, b; η_d = 0.9; aux 0.5 kW; HVAC bands (2, 0, 0, 0.7) kW; capacity
-  {VEHICLE.battery_capacity_kwh:g} kWh assumed, it affects SoC columns only); profile
-  `{LOGGED.name}` for the unlabelled real traces; calibrated {', '.join(PARAMS)} and the relative
-  noise.
+* **Vehicle and physics**: library defaults, as in `calibration/realtrips_physics.py`:
+  `VehicleParams.from_coastdown(179.4, 0.28, 0.0235, 1919)` (continuous climate model,
+  compact-BEV defaults; capacity {VEHICLE.battery_capacity_kwh:g} kWh assumed, it affects SoC
+  columns only); profile `{LOGGED.name}` for the unlabelled real traces; calibrated (default
+  for this vehicle) {', '.join(PARAMS)} and the relative noise.
 * **Predictors**: {LABELS['nominal']}; {LABELS['calibrated']} (posterior medians; intervals
   from the posterior predictive: parameter uncertainty plus the inferred relative noise);
   {LABELS['hybrid']} (`HybridModel` defaults: its own physics posterior with
@@ -422,7 +423,12 @@ def main(argv=None) -> int:
     ap.add_argument("--report-dir", default=None,
                     help="where to write the full HTML report (default: a temporary directory)")
     ap.add_argument("--folds", type=int, default=N_FOLDS, help="cross-validation folds")
+    ap.add_argument("--data", type=Path, default=DATA, help="folder with trips.csv and "
+                    "timeseries_1hz.parquet")
+    ap.add_argument("--out", type=Path, default=RESULTS, help="output folder")
     args = ap.parse_args(argv)
+    global RESULTS, DATA
+    RESULTS, DATA = args.out, args.data
     if not (DATA / "trips.csv").exists():
         print(f"skip: real trips not found at {DATA} (see calibration/realtrips_report.py)")
         return 0
@@ -430,7 +436,7 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()
-    measured = load()
+    measured = load(DATA)
     report_dir = Path(args.report_dir or tempfile.mkdtemp(prefix="realtrips_report_")) / "report"
     summary = calibration_report(measured, out_dir=report_dir, test_fraction=TEST_FRACTION,
                                  source="../shared/realtrips (trips.csv + timeseries_1hz.parquet)",
@@ -438,7 +444,7 @@ def main(argv=None) -> int:
     print(f"single split: {json.dumps(_fold_row(summary))}")
     cv = {}
     for name, v in VARIANTS.items():
-        m = load(drop_hour=v["drop_hour"]) if v["drop_hour"] else measured
+        m = load(DATA, drop_hour=v["drop_hour"]) if v["drop_hour"] else measured
         folds, pred = cross_validate(m, v["model_params"], args.folds)
         cv[name] = {"folds": folds, "pooled": pooled_scores(pred),
                     "n_trips": len(m.trips), "n_rejected": m.n_rejected}
