@@ -46,10 +46,9 @@ from hybridev.bayes.priors import CLIMATE_PARAMS, DEFAULT_PARAMS, PhysicsPrior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.fileio import atomic_path
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
+from hybridev.physics.params import LOGGED_PROFILE
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.stats_build import trip_stats
-
-from hybridev.physics.params import LOGGED_PROFILE
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "realtrips"

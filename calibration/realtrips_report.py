@@ -54,8 +54,8 @@ from hybridev.core.fileio import atomic_path
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "realtrips"
-RESULTS = Path("realtrips_results")
+DATA = DATA_DEFAULT = ROOT.parent / "shared" / "realtrips"
+RESULTS = RESULTS_DEFAULT = Path("realtrips_results")
 SEED = 0
 LEVEL = 0.9
 TEST_FRACTION = 0.2
@@ -419,15 +419,15 @@ q05/q95: 90 % credible interval. Chain: {dg['n_walkers']} walkers × {dg['n_step
 
 
 def main(argv=None) -> int:
+    global RESULTS, DATA
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--report-dir", default=None,
                     help="where to write the full HTML report (default: a temporary directory)")
     ap.add_argument("--folds", type=int, default=N_FOLDS, help="cross-validation folds")
-    ap.add_argument("--data", type=Path, default=DATA, help="folder with trips.csv and "
-                    "timeseries_1hz.parquet")
-    ap.add_argument("--out", type=Path, default=RESULTS, help="output folder")
+    ap.add_argument("--data", type=Path, default=DATA_DEFAULT, help="folder with trips.csv "
+                    "and timeseries_1hz.parquet")
+    ap.add_argument("--out", type=Path, default=RESULTS_DEFAULT, help="output folder")
     args = ap.parse_args(argv)
-    global RESULTS, DATA
     RESULTS, DATA = args.out, args.data
     if not (DATA / "trips.csv").exists():
         print(f"skip: real trips not found at {DATA} (see calibration/realtrips_report.py)")

@@ -33,7 +33,6 @@ curve for a compact BEV against published measurements plus a sensitivity figure
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
@@ -43,14 +42,14 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import rw_curves  # noqa: E402
-import rw_report  # noqa: E402
+import rw_curves
+import rw_report
 
-from hybridev import HybridModel, VehicleParams  # noqa: E402
-from hybridev.bayes.sampler import calibrate_physics  # noqa: E402
-from hybridev.data.logs import MeasuredTrips, measured_from_frames  # noqa: E402
-from hybridev.physics.stats import energy_from_stats  # noqa: E402
-from hybridev.physics.stats_build import trip_stats  # noqa: E402
+from hybridev import HybridModel, VehicleParams
+from hybridev.bayes.sampler import calibrate_physics
+from hybridev.data.logs import MeasuredTrips, measured_from_frames
+from hybridev.physics.stats import energy_from_stats
+from hybridev.physics.stats_build import trip_stats
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[2] / "shared" / "realtrips"

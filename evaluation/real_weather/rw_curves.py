@@ -15,7 +15,7 @@ import numpy as np
 from hybridev import VehicleParams, trace_energy_kwh
 from hybridev.physics.params import LOGGED_PROFILE
 
-__all__ = ["COMPACT", "PUBLISHED", "cycle", "curve_table", "sensitivity", "TOLERANCE"]
+__all__ = ["COMPACT", "PUBLISHED", "TOLERANCE", "curve_table", "cycle", "sensitivity"]
 
 COMPACT = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)
 """An illustrative compact BEV (coast-down A/B/C of the size class, 1,700 kg test mass)."""

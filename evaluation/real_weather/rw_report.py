@@ -195,11 +195,11 @@ speed², duration x |T - 21 °C| and elevation gain/loss.
 
 ### Bias by temperature band (% , held out)
 
-{_md_table(["band"] + hdr, t_rows)}
+{_md_table(["band", *hdr], t_rows)}
 
 ### Bias by trip duration (%, held out)
 
-{_md_table(["duration"] + hdr, d_rows)}
+{_md_table(["duration", *hdr], d_rows)}
 
 ![residuals](figures/rw_residuals.png)
 

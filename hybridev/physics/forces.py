@@ -33,8 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from hybridev.physics.climate import _profile_values, hvac_power_kw
-from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
+from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 
 __all__ = [
     "soc_trajectory",

@@ -29,17 +29,17 @@ import numpy as np
 import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
-from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.forces import (
     _battery_energy_kwh,
-    _moving_steps,
     _interval_grade,
+    _moving_steps,
     _wheel_power_w,
     soc_trajectory,
     trace_power_kw,
 )
 from hybridev.physics.kinematics import _check_steps, profile_table, synthesize_speed_trace
 from hybridev.physics.params import PROFILES, VehicleParams
+from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.validation import validate_trips
 
 __all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces",
