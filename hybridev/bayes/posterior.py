@@ -243,18 +243,7 @@ class PhysicsPosterior:
     def prior_check(self, level: float = 0.99) -> pd.DataFrame:
         """Posterior medians against the central ``level`` range of their priors.
 
-        A median outside its prior's 99 % range means the data pulled the
-        parameter somewhere the prior calls implausible: the physics is
-        compensating for something it does not model (flag it, do not trust
-        the value).
-
-        Returns
-        -------
-        pandas.DataFrame
-            Index: sampled parameters; columns ``prior_centre``, ``prior_lo``,
-            ``prior_hi``, ``median``, ``shift_sd`` (median minus prior centre,
-            in prior sds, on the log scale for lognormal priors) and
-            ``inside`` (bool).
+        See :func:`hybridev.bayes.checks.prior_check`.
 
         Examples
         --------
@@ -263,32 +252,9 @@ class PhysicsPosterior:
         >>> bool(post.prior_check().loc["aux_base_kw", "inside"])
         True
         """
-        from scipy.stats import norm
+        from hybridev.bayes.checks import prior_check
 
-        from hybridev.bayes.priors import PhysicsPrior
-
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
-        known = {f.name for f in dataclasses.fields(PhysicsPrior)}
-        pr = PhysicsPrior(**{k: tuple(v) if isinstance(v, list) else v
-                             for k, v in self.prior.items() if k in known})
-        nom = self.nominal_values(self.vehicle)
-        eta_r_max = max(p.regen_efficiency for p in PROFILES.values())
-        cd = self.vehicle.road_load_source == "coastdown"
-        z = float(norm.ppf(0.5 + level / 2))
-        med = np.median(self.samples, axis=0)
-        rows = []
-        for name, m in zip(self.param_names, med, strict=True):
-            kind, c, sd, lo, hi = pr.spec(name, nom[name], eta_r_max, coastdown=cd)
-            if kind == "lognormal":
-                a, b, centre, shift = (np.exp(c - z * sd), np.exp(c + z * sd), np.exp(c),
-                                       (np.log(m) - c) / sd if m > 0 else -np.inf)
-            else:
-                a, b, centre, shift = max(lo, c - z * sd), min(hi, c + z * sd), c, (m - c) / sd
-            rows.append((centre, a, b, m, shift, bool(a <= m <= b)))
-        return pd.DataFrame(rows, index=pd.Index(self.param_names, name="parameter"),
-                            columns=["prior_centre", "prior_lo", "prior_hi", "median",
-                                     "shift_sd", "inside"])
+        return prior_check(self, level)
 
     def correlations(self) -> pd.DataFrame:
         """Posterior correlation matrix of the sampled parameters.
