@@ -59,7 +59,36 @@ COASTDOWN = {"a_n": 179.4, "b_n_per_kmh": 0.28, "c_n_per_kmh2": 0.0235, "mass_kg
 """The car's coast-down coefficients and test mass: the user's input for this car."""
 
 METHODS = ("nominal_physics", "calibrated_physics", "hybrid", "nnls_stats", "linreg_summary",
-           "median_kwh_per_km")
+           "median_kwh_per_km", "physics_no_prior")
+"""``physics_no_prior`` is a diagnostic, not a model: the calibrated parameters fitted by
+relative least squares without any prior (what the data alone want)."""
+
+FREE = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency", "aux_base_kw",
+        "regen_scale", "heating_scale", "cooling_scale", "warmup_scale")
+
+
+def _fit_no_prior(stats, y: np.ndarray, idx: np.ndarray) -> dict[str, float]:
+    """Least-squares relative fit of the physical parameters on trips ``idx``, no prior."""
+    from scipy.optimize import least_squares
+
+    from hybridev.physics.stats import coefficients
+
+    nom = {n: float(v) for n, v in zip(FREE, (
+        stats.vehicle.drag_area_m2, stats.vehicle.rolling_resistance_coef,
+        stats.vehicle.drivetrain_efficiency, stats.vehicle.aux_base_kw, 1, 1, 1, 1),
+        strict=True)}
+    f = stats.features()[:, idx]
+    base = {"linear_drag_n_per_mps": stats.vehicle.linear_drag_n_per_mps, "hvac_scale": 1.0,
+            "drive_loss_kw": stats.vehicle.drive_loss_kw}
+
+    def energy(x):
+        return np.array(coefficients(base | dict(zip(FREE, x, strict=True))), float) @ f
+
+    lo = [0.05, 1e-4, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
+    hi = [3.0, 0.05, 1.0, 10.0, 1.5, 20.0, 20.0, 20.0]
+    r = least_squares(lambda x: energy(x) / y[idx] - 1.0, [nom[n] for n in FREE],
+                      bounds=(lo, hi))
+    return dict(zip(FREE, (float(v) for v in r.x), strict=True))
 
 
 def load(root: Path, vehicle: VehicleParams) -> tuple[MeasuredTrips, pd.DataFrame]:
@@ -115,7 +144,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
     keep = np.abs(feats).sum(axis=1) > 0
     xs = _summary_x(trips, extra)
     folds = np.full(len(y), -1)
-    posts = []
+    posts, no_prior = [], []
     for k, (tr, te) in enumerate(GroupKFold(n_splits=N_FOLDS).split(
             xs, groups=trips["date"].to_numpy())):
         folds[te] = k
@@ -130,11 +159,14 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         pred["hybrid"][te] = model.predict(test, timeseries=m.traces)["energy_kwh_pred"]
         w, _ = nnls(feats[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
         pred["nnls_stats"][te] = feats[keep][:, te].T @ w
+        free = _fit_no_prior(stats, y, tr)
+        pred["physics_no_prior"][te] = energy_from_stats(stats.take(te), free)
+        no_prior.append(free)
         lr = LinearRegression().fit(xs[tr], y[tr])
         pred["linreg_summary"][te] = lr.predict(xs[te])
         kwh_km = np.median(y[tr] / trips["distance_km"].to_numpy(float)[tr])
         pred["median_kwh_per_km"][te] = kwh_km * trips["distance_km"].to_numpy(float)[te]
-    return {"pred": pred, "folds": folds, "posteriors": posts, "y": y}
+    return {"pred": pred, "folds": folds, "posteriors": posts, "y": y, "no_prior": no_prior}
 
 
 def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) -> dict:
@@ -200,6 +232,7 @@ def main(argv=None) -> int:
             "converged": post_all.diagnostics.get("converged")},
         "posterior_folds_inside_prior_99": [bool(p.prior_check()["inside"].all())
                                             for p in cv["posteriors"]],
+        "no_prior_fits_by_fold": cv["no_prior"],
         "published_curve": rw_curves.curve_table(),
         "tolerance": rw_curves.TOLERANCE,
     }
