@@ -220,8 +220,8 @@ priors (coast-down road load to ~10 %, climate use within a factor ~8) keep the
 calibrated physics physical and cost about {sc['calibrated_physics']['mape_pct'] - sc['physics_no_prior']['mape_pct']:.1f}
 points of MAPE on this car; NNLS has no such constraint (its weights re-weight
 rolling, aerodynamic and inertial work freely). The residual network, trained on
-the ~55 trips a fold leaves it after its validation and conformal shares, recovers
-only part of the gap.
+the two thirds of the trips a fold leaves for training minus its validation and
+conformal shares, recovers only part of the gap.
 
 ## Posterior on all trips: against the prior
 
