@@ -18,10 +18,9 @@ __all__ = []
 class _LogPosterior:
     """Vectorised log posterior over ``theta = (params..., [mode logits,] [tau,] log sigma_rel)``.
 
-    With ``groups`` (integer codes per trip) a group random effect of
-    relative sd ``tau`` (half-normal prior) is marginalised analytically
-    (:meth:`_group_log_lik`); marginalised (unlabelled) trips then enter
-    with their mixture-mean energy.
+    With ``groups`` (integer codes per trip; one row per trip) a group random
+    effect of relative sd ``tau`` (half-normal prior) is marginalised
+    analytically (:meth:`_group_log_lik`).
 
     With ``infer_modes`` the mixture weights of unlabelled trips are
     ``pi = softmax(0, a_normal, a_aggressive)`` (eco first, as in PROFILES) with a
@@ -41,6 +40,9 @@ class _LogPosterior:
         self.n_group = 0
         specs = list(specs) + [("alr", 0.0, np.inf, -20.0, 20.0)] * self.n_alr
         if groups is not None:  # group codes (n_trips,), 0..n_groups-1
+            if stats.marginalised:
+                raise ValueError("a group random effect needs one row per trip "
+                                 "(no trip marginalised over modes)")
             g = np.asarray(groups, dtype=np.intp)
             self.G = np.zeros((self.n_trips, int(g.max()) + 1))
             self.G[np.arange(self.n_trips), g] = 1.0
@@ -96,16 +98,6 @@ class _LogPosterior:
         mx = logits.max(axis=1, keepdims=True)
         return logits - mx - np.log(np.exp(logits - mx).sum(axis=1, keepdims=True))
 
-    def _trip_energy(self, theta: np.ndarray, e: np.ndarray) -> np.ndarray:
-        """Per-trip (mixture-mean) energy (n, n_trips) from row energies."""
-        if self.shape is None:
-            return e
-        lw = np.broadcast_to(self.log_w, e.shape).reshape(len(theta), *self.shape)
-        if self.n_alr:
-            lw = lw + self.log_pi(theta)[:, :, None] * self.unknown
-        w = np.exp(lw)
-        return (e.reshape(len(theta), *self.shape) * w).sum(axis=1) / w.sum(axis=1)
-
     def _group_log_lik(self, theta: np.ndarray, e: np.ndarray) -> np.ndarray:
         """Relative residuals with a shared group effect, marginalised in closed form.
 
@@ -113,7 +105,6 @@ class _LogPosterior:
         ``eps_i ~ N(0, sigma^2)``: each group's residuals are jointly normal
         with covariance ``sigma^2 I + tau^2 1 1^T`` (Sherman-Morrison).
         """
-        e = self._trip_energy(theta, e)
         r = self.y_trip / e - 1.0
         s2 = np.exp(2.0 * theta[:, -1])[:, None]
         t2 = (theta[:, -2] ** 2)[:, None]

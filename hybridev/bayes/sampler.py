@@ -146,6 +146,9 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         ``"auto"`` (default): the ``date`` column if the table has one, else
         ``session_group``, else none; a column name; one label per trip;
         ``None``: independent trips. Missing labels form their own groups.
+        Trips whose mode is marginalised (no label, no logged trace) cannot
+        share a group effect: ``"auto"`` then falls back to independent trips
+        and explicit groups raise a ``ValueError``.
 
     Returns
     -------
@@ -202,6 +205,14 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                   or bool((trips["mode"].isna() | (trips["mode"].astype(str) == "")).any()))
     if infer and unlabelled and not stats.marginalised:
         infer, n_alr = False, 0  # every unlabelled trip has a logged trace: nothing to infer
+    if codes is not None and stats.marginalised:
+        # A trip whose mode is a mixture has no single energy for the shared day effect.
+        if isinstance(groups, str) and groups == "auto":
+            codes = None
+        else:
+            raise ValueError("groups need trips with a known mode or a logged trace; some "
+                             "trips are a mixture over modes (missing_mode="
+                             f"{missing_mode!r}): label them or pass groups=None")
     n_group = 0 if codes is None else 1
     ndim = len(names) + n_alr + n_group + 1
     if n_walkers < 2 * ndim:

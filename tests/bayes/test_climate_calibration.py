@@ -89,3 +89,16 @@ def test_coastdown_priors_are_tight_and_flag_unphysical_medians():
     assert not chk["inside"].all()
     corr = post.correlations()
     assert corr.shape == (2, 2) and np.allclose(np.diag(corr), 1.0)
+
+
+def test_groups_need_unmarginalised_trips():
+    """Unlabelled synthetic trips are a mixture over modes: "auto" groups fall back to
+    independent trips, explicit groups are refused."""
+    m = simulate_measured(make_trips(40, seed=0), noise_rel=0.03, seed=1, hide_mode=True)
+    m["date"] = [f"d{i % 4}" for i in range(40)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        post = calibrate_physics(m, params=("aux_base_kw",), n_steps=300)
+    assert "group_sd" not in post.diagnostics
+    with pytest.raises(ValueError, match="groups"):
+        calibrate_physics(m, params=("aux_base_kw",), n_steps=300, groups="date")
