@@ -69,6 +69,10 @@ def aux_power_kw(temperature_c, profile: ProfileLike = "normal",
                  vehicle: VehicleParams | None = None) -> np.ndarray:
     """Auxiliary power ``P_b + P_c(T) + P_m(mode)`` in kW.
 
+    With the continuous climate model ``P_c`` is the steady climate power;
+    the per-trip warm-up energy and the drive loss while moving are not
+    included (see :mod:`hybridev.physics.forces`).
+
     Examples
     --------
     >>> float(aux_power_kw(20.0, "aggressive"))
