@@ -32,7 +32,9 @@ class _LogPosterior:
                  fixed: dict[str, float], infer_modes: bool = False, groups=None):
         self.names = list(names)
         self.n_alr = 2 if infer_modes else 0
-        self.F = stats.features()
+        f = stats.features()
+        self.rows = np.flatnonzero(np.abs(f).sum(axis=1) > 0)  # all-zero terms cost nothing
+        self.F = f[self.rows]
         self.y = energy_kwh[stats.trip]
         self.y_trip = np.asarray(energy_kwh, dtype=float)
         self.log_w = stats.log_weight
@@ -118,7 +120,8 @@ class _LogPosterior:
 
     def log_lik(self, theta: np.ndarray) -> np.ndarray:
         v = self.values(theta)
-        coef = np.stack(coefficients(v), axis=1)
+        coef = np.stack([np.broadcast_to(c, (len(theta),)) for c in coefficients(v)],
+                        axis=1)[:, self.rows]
         e = coef @ self.F
         if self.n_group:
             return self._group_log_lik(theta, e)
