@@ -4,18 +4,25 @@ Run from the repository root::
 
     python calibration/realtrips_physics.py [--data DIR] [--out DIR]
 
-``--data`` defaults to ``../shared/realtrips``; ``--out`` to ``results/calibration``
-(untracked: a run never overwrites tracked files); the committed outputs in
-``calibration/results`` come from ``--out calibration/results``.
-
 Reads the 104 trips of one real car (``trips.csv`` + ``timeseries_1hz.parquet``,
 see that folder's README; the data are never copied into the repository),
 runs the physics on the logged 1 Hz speed traces with grade from smoothed GPS
 elevation, calibrates the physics parameters on training sessions with
 ``hybridev.bayes.sampler.calibrate_physics`` and scores them on held-out sessions
 (grouped by ``session_group``, so back-to-back trips never straddle the
-split). Writes ``calibration/results/realtrips_physics.md``, ``.json`` and
-``realtrips_physics_*.png``. Exits 0 with a message when the data are absent.
+split). Writes ``realtrips_physics.md``, ``.json`` and ``realtrips_physics_*.png`` to
+``--out`` (default: ``results/calibration`` under the repository, untracked, so
+that no tracked file is overwritten; the committed ``calibration/results`` were
+made with ``--out calibration/results``). Exits 0 with a message when the data are
+absent.
+
+Settings are the library defaults a new user gets: the vehicle is only
+``VehicleParams.from_coastdown(A, B, C, mass_kg=m)`` (the car's published
+coast-down coefficients and test mass; the capacity below is an assumption that
+only SoC columns use), logged unlabelled trips use the library's ``logged``
+profile, and ``calibrate_physics`` samples its default parameters (with the
+climate scales of the continuous climate model). Nothing is taken from the
+data's README.
 
 The functions here (``load_realtrips``, ``split_sessions``, ``score``) are
 meant to be reused by the later full-hybrid report; library code never
@@ -34,20 +41,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybridev import DrivingProfile, VehicleParams
-from hybridev.bayes.priors import DEFAULT_PARAMS, PhysicsPrior
+from hybridev import VehicleParams
+from hybridev.bayes.priors import CLIMATE_PARAMS, DEFAULT_PARAMS, PhysicsPrior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.fileio import atomic_path
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
+from hybridev.physics.params import LOGGED_PROFILE
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.stats_build import trip_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "realtrips"
-RESULTS = ROOT / "calibration" / "results"
-"""The committed outputs; written only when asked (``--out calibration/results``)."""
-DEFAULT_OUT = ROOT / "results" / "calibration"
-"""Default ``--out``: the untracked ``results/`` folder (never overwrites tracked files)."""
+RESULTS = ROOT / "results" / "calibration"  # untracked (.gitignore: /results/)
 SEED = 0
 TEST_SIZE = 0.3
 N_FOLDS = 5
@@ -59,33 +64,16 @@ SOC_INITIAL = 0.8
 BATTERY_KWH = 60.0
 """Assumed usable capacity (the source names none); only SoC columns depend on it."""
 
-VEHICLE = VehicleParams.from_coastdown(
-    179.4, 0.28, 0.0235, 1919.0,
-    battery_capacity_kwh=BATTERY_KWH,
-    # Coast-down A, B, C measure the whole road load with the motor unpowered: tyres,
-    # aerodynamics and driveline drag. What is left between battery and wheel is the
-    # conversion under load (inverter, motor, reduction gear): typically 0.85-0.92 over
-    # a cycle, so the paper's 0.90 is kept as nominal.
-    drivetrain_efficiency=0.90,
-    # README: "At standstill the car draws about 0.5 kW, and about 1.2 kW on hot days
-    # with the A/C on." -> base 0.5 kW, no heating/cooling load from 0 to 25 degC, +0.7 kW
-    # above 25 degC (the model's hot band). Below 0 degC (no data) the paper's 2.0 kW.
-    aux_base_kw=0.5,
-    hvac_kw=(2.0, 0.0, 0.0, 0.7),
-    source="realtrips README: coast-down A/B/C, test mass; aux from the README's standstill "
-           "draw; capacity assumed",
-)
+VEHICLE = VehicleParams.from_coastdown(179.4, 0.28, 0.0235, 1919.0,
+                                       battery_capacity_kwh=BATTERY_KWH)
+"""The user's input: coast-down A, B, C and test mass; every other field a default."""
 
-LOGGED = DrivingProfile(
-    "logged", max_accel_mps2=4.0, efficiency_multiplier=1.0, regen_efficiency=0.65,
-    aux_kw=0.0, phase_fractions=(0.3, 0.5, 0.2),
-    source="real traces: driving style is in the logged speed, so no efficiency multiplier "
-           "and no mode auxiliary power; regen efficiency of the paper's 'normal' profile "
-           "(calibrated through regen_scale)",
-)
-"""Profile for the logged trips (the data label no driver)."""
+LOGGED = LOGGED_PROFILE
+"""The library's profile for logged trips without a mode (used by default)."""
 
-PARAMS = (*DEFAULT_PARAMS, "hvac_scale")
+PARAMS = (*DEFAULT_PARAMS, *CLIMATE_PARAMS)
+"""What ``calibrate_physics`` samples by default for this (continuous-climate) vehicle."""
+
 
 
 def load_realtrips(root: Path = DATA, vehicle: VehicleParams = VEHICLE
@@ -107,6 +95,10 @@ def load_realtrips(root: Path = DATA, vehicle: VehicleParams = VEHICLE
         "temperature_c": src["amb_temp_mean_c"],
         "energy_kwh": src["e_batt_net_kwh"],
         "soc_initial": SOC_INITIAL,
+        # the day of the trip (its session when undated): calibrate_physics's default
+        # groups="auto" gives each day a random effect
+        "date": src["date"].astype(object).where(
+            src["date"].notna(), "session " + src["session_group"].astype(str)).astype(str),
     })
     ts = pd.read_parquet(root / "timeseries_1hz.parquet",
                          columns=["trip_id", "t_s", "speed_kmh", "elevation_m", "amb_temp_c"])
@@ -161,9 +153,8 @@ def score(pred: pd.DataFrame) -> dict[str, float]:
     }
 
 
-def _fit(m: MeasuredTrips, mask, missing_mode=LOGGED, params=PARAMS):
-    return calibrate_physics(m.select(mask), VEHICLE, params=params, seed=SEED,
-                             missing_mode=missing_mode)
+def _fit(m: MeasuredTrips, mask):
+    return calibrate_physics(m.select(mask), VEHICLE, seed=SEED)  # library defaults
 
 
 def _figures(post, pred_cv: pd.DataFrame, m: MeasuredTrips, out: dict[str, Path]) -> None:
@@ -248,17 +239,14 @@ def _table(df: pd.DataFrame, fmt: dict[str, str]) -> str:
 def main(argv=None) -> int:
     global RESULTS
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=DATA,
-                    help="folder with trips.csv and timeseries_1hz.parquet "
-                         "(default ../shared/realtrips)")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                    help="output folder (default results/calibration, untracked; "
-                         "--out calibration/results regenerates the committed outputs)")
+    ap.add_argument("--data", type=Path, default=DATA, help="folder with trips.csv and "
+                    "timeseries_1hz.parquet")
+    ap.add_argument("--out", type=Path, default=RESULTS, help="output folder")
     args = ap.parse_args(argv)
+    RESULTS = args.out
     if not (args.data / "trips.csv").exists():
         print(f"skip: real trips not found at {args.data} (see calibration/realtrips_physics.py)")
         return 0
-    RESULTS = args.out
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -281,12 +269,6 @@ def main(argv=None) -> int:
     pred_cv = pd.concat(folds, ignore_index=True)
     pooled = score(pred_cv)
 
-    # Variants: no profile assigned, likelihood marginalised over the paper's three modes,
-    # with equal weights or with the weights inferred.
-    variants = {}
-    for mm in ("marginalize", "infer"):
-        pv = _fit(m, ~test, missing_mode=mm)
-        variants[mm] = (pv, score(predictions(pv, m.select(test))))
     elapsed = time.perf_counter() - t0
 
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -299,7 +281,7 @@ def main(argv=None) -> int:
     sessions = groups.nunique()
     n_test_sessions = groups[test].nunique()
     summary = {
-        "generated_by": "python calibration/realtrips_physics.py --out calibration/results",
+        "generated_by": "python calibration/realtrips_physics.py",
         "data": {"n_trips": len(m.trips), "n_rejected": m.n_rejected,
                  "n_sessions": int(sessions), "n_samples_1hz": len(m.traces.t_s)},
         "vehicle": {k: (list(v) if isinstance(v, tuple) else v)
@@ -313,11 +295,7 @@ def main(argv=None) -> int:
         "posterior_train": s.reset_index().to_dict(orient="records"),
         "diagnostics_train": d,
         "held_out": primary, "cv_pooled": pooled, "cv_folds": per_fold,
-        "held_out_modes_marginalised": variants["marginalize"][1],
-        "held_out_modes_inferred": variants["infer"][1],
-        "mode_weights_inferred": variants["infer"][0].summary(LEVEL).loc[
-            [f"weight_{k}" for k in ("eco", "normal", "aggressive")]].reset_index().to_dict(
-            orient="records"),
+        "prior_check_train": post.prior_check().reset_index().to_dict(orient="records"),
         "elapsed_s": elapsed,
     }
     with atomic_path(RESULTS / "realtrips_physics.json") as tmp:
@@ -329,16 +307,14 @@ def main(argv=None) -> int:
     metrics = pd.DataFrame({
         f"held-out sessions ({primary['n_trips']} trips)": primary,
         f"{N_FOLDS}-fold grouped CV, pooled ({pooled['n_trips']} trips)": pooled,
-        "variant: paper modes, equal weights": variants["marginalize"][1],
-        "variant: paper modes, weights inferred": variants["infer"][1],
     }).drop(index="n_trips")
-    w_inf = variants["infer"][0].summary(LEVEL)
-    w_med = w_inf.loc[[f"weight_{k}" for k in ("eco", "normal", "aggressive")], "median"]
-    top, w_top = w_med.idxmax().removeprefix("weight_"), float(w_med.max())
+    pc = post.prior_check()
+    flagged = ", ".join(f"`{n}`" for n in pc.index[~pc["inside"]]) or "none"
     metrics.index.name = "metric"
     md = f"""# Physics-only Bayesian calibration on real trips
 
-Generated by `python calibration/realtrips_physics.py --out calibration/results` ({elapsed:.0f} s); do not edit by hand.
+Generated by `python calibration/realtrips_physics.py --out {RESULTS}` ({elapsed:.0f} s); do
+not edit by hand.
 Data: `../shared/realtrips` (not in the repository; see its README): {len(m.trips)} trips of one
 car in {sessions} driving sessions, {len(m.traces.t_s):,} logged 1 Hz samples;
 {m.n_rejected} rows or traces rejected by `hybridev.data.logs.measured_from_frames`.
@@ -349,29 +325,27 @@ car in {sessions} driving sessions, {len(m.traces.t_s):,} logged 1 Hz samples;
   (per-interval time step), grade from GPS elevation smoothed by a local linear fit over
   200 m of travelled distance (`hybridev.data.logs`). Target: measured battery energy at the
   terminals, `e_batt_net_kwh` (integral of V*I).
-* **Vehicle (nominal)**: `VehicleParams.from_coastdown(179.4, 0.28, 0.0235, 1919.0)` →
-  C_dA = {VEHICLE.drag_area_m2:.3f} m², C_r = {VEHICLE.rolling_resistance_coef:.5f},
-  b = {VEHICLE.linear_drag_n_per_mps:.3f} N/(m/s). The coast-down load already contains the
-  driveline drag with the motor unpowered, so `drivetrain_efficiency` = {VEHICLE.drivetrain_efficiency}
-  stands for the battery-to-wheel conversion under load (inverter, motor, gear).
-  Auxiliary load from the README: base {VEHICLE.aux_base_kw} kW (standstill draw), HVAC bands
-  {VEHICLE.hvac_kw} kW for T < 0, 0-15, 15-25, > 25 °C (+0.7 kW for A/C on hot days).
-  Battery capacity {BATTERY_KWH:g} kWh and `soc_initial` = {SOC_INITIAL} are assumptions
-  (the source has neither); no number below depends on them.
-* **Profile**: the data label no driver, so every trip uses the profile `logged`
-  (efficiency multiplier 1, regen efficiency {LOGGED.regen_efficiency}, no mode auxiliary power):
-  on a real trace the driving style is in the speed signal itself. The two variant columns
-  below instead leave the trips unlabelled and marginalise over the paper's three profiles,
-  with equal weights (`missing_mode="marginalize"`) or with the weights sampled too
-  (`missing_mode="infer"`).
-* **Calibrated**: {", ".join(f"`{p}`" for p in PARAMS)} and the relative noise; priors of
-  `hybridev.bayes.sampler.PhysicsPrior()` (lognormal sd {prior.drag_area_log_sd} for C_dA and C_r,
-  efficiency N(nominal, {prior.efficiency_sd}) on {prior.efficiency_bounds}, aux lognormal sd
-  {prior.aux_log_sd}, HVAC scale lognormal sd {prior.hvac_log_sd}, regen scale N(1, {prior.regen_scale_sd}) on
-  (0, 1/η_r), noise log-uniform on {prior.noise_rel_bounds}).
+* **Vehicle (nominal)**: `VehicleParams.from_coastdown(179.4, 0.28, 0.0235, 1919.0)`, library
+  defaults otherwise → C_dA = {VEHICLE.drag_area_m2:.3f} m², C_r = {VEHICLE.rolling_resistance_coef:.5f},
+  b = {VEHICLE.linear_drag_n_per_mps:.3f} N/(m/s), η_d = {VEHICLE.drivetrain_efficiency},
+  base auxiliary {VEHICLE.aux_base_kw} kW, drive loss {VEHICLE.drive_loss_kw} kW, continuous
+  climate model ({VEHICLE.heater_kind} heater, UA {VEHICLE.cabin_ua_w_per_k:g} W/K, set point
+  {VEHICLE.t_set_c:g} °C) with per-step logged ambient temperature. Battery capacity
+  {BATTERY_KWH:g} kWh and `soc_initial` = {SOC_INITIAL} are assumptions (the source has
+  neither); no number below depends on them.
+* **Profile**: unlabelled logged trips use the library's `logged` profile (efficiency
+  multiplier 1, regen efficiency {LOGGED.regen_efficiency}, no mode auxiliary power).
+* **Calibrated** (library defaults): {", ".join(f"`{p}`" for p in PARAMS)}, the relative
+  noise and a random effect per `date` (`groups="auto"`). Priors of
+  `PhysicsPrior()` (coast-down: lognormal sd {prior.coastdown_log_sd} for C_dA and C_r;
+  efficiency N(nominal, {prior.efficiency_sd}); aux lognormal sd {prior.aux_log_sd};
+  heating/cooling scales lognormal sd {prior.hvac_log_sd}; warm-up lognormal sd
+  {prior.warmup_log_sd}; regen scale N(1, {prior.regen_scale_sd})). Medians outside their
+  prior's 99 % range (flagged as unphysical): {flagged}.
 * **Split**: whole sessions held out (`GroupShuffleSplit`, test size {TEST_SIZE}, seed {SEED}):
   {int((~test).sum())} training trips, {int(test.sum())} test trips in {n_test_sessions} sessions.
   Robustness: {N_FOLDS}-fold `GroupKFold` (shuffled, seed {SEED}), every trip held out once.
+  The day-grouped evaluation with baselines is `evaluation/real_weather/real_weather.md`.
 
 ## Posterior (training sessions) vs nominal
 
@@ -403,24 +377,13 @@ Per fold ({N_FOLDS}-fold grouped CV):
 
 ## Reading the numbers
 
-* Variants with the paper's profiles: the equal-weight mixture lets every training trip pick
-  the profile that fits it, but a new unlabelled trip is predicted by the mixture mean over
-  all three, which includes the paper's aggressive profile (1.35 × traction, +1.5 kW):
-  on real traces that double-counts driving style, hence the large held-out error. With the
-  weights inferred the posterior puts {w_top:.2f} on `{top}` (eco / normal / aggressive:
-  {w_inf.loc["weight_eco", "median"]:.2f} / {w_inf.loc["weight_normal", "median"]:.2f} /
-  {w_inf.loc["weight_aggressive", "median"]:.2f}) and the held-out error is back at the level
-  of the `logged` profile: learning the weights is what makes unlabelled trips usable.
 * The relative noise the posterior infers (median {s.loc["noise_rel", "median"] * 100:.1f} %) is
   the physics model's error on these trips, not sensor noise: the energy measurement itself
   (V*I) is far more precise. It is what the residual model has to explain.
-* `aux_base_kw` absorbs every load proportional to time, not only the electrical auxiliaries:
-  inverter and motor losses at low load are the likely reason it exceeds the ~0.5 kW
-  standstill draw.
-* The HVAC bands have fixed thresholds (the paper's); the README's A/C draw appears only on the
-  hottest trips, while the > 25 °C band adds it to every trip above 25 °C, hence the low
-  `hvac_scale`. Trips in the cold (5-10 °C) are under-predicted by the calibrated physics
-  (see the residual plot): a temperature effect the physics lacks.
+* `aux_base_kw` absorbs every load proportional to time, not only the electrical auxiliaries.
+* The climate scales say how much of the compact-BEV climate load this car and its driver
+  draw; a scale far below 1 (flagged above when outside the prior) means the default climate
+  model over-predicts this car's heating or cooling.
 """
     with atomic_path(RESULTS / "realtrips_physics.md") as tmp:
         tmp.write_text(md)

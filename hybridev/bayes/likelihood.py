@@ -10,13 +10,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from hybridev.physics.stats import PhysicsStats
+from hybridev.physics.stats import PhysicsStats, coefficients
 
 __all__ = []
 
 
 class _LogPosterior:
-    """Vectorised log posterior over ``theta = (params..., [mode logits,] log sigma_rel)``.
+    """Vectorised log posterior over ``theta = (params..., [mode logits,] [tau,] log sigma_rel)``.
+
+    With ``groups`` (integer codes per trip; one row per trip) a group random
+    effect of relative sd ``tau`` (half-normal prior) is marginalised
+    analytically (:meth:`_group_log_lik`).
 
     With ``infer_modes`` the mixture weights of unlabelled trips are
     ``pi = softmax(0, a_normal, a_aggressive)`` (eco first, as in PROFILES) with a
@@ -25,14 +29,28 @@ class _LogPosterior:
     """
 
     def __init__(self, stats: PhysicsStats, energy_kwh: np.ndarray, names, specs, prior,
-                 fixed: dict[str, float], infer_modes: bool = False):
+                 fixed: dict[str, float], infer_modes: bool = False, groups=None):
         self.names = list(names)
         self.n_alr = 2 if infer_modes else 0
-        self.F = stats.features()
+        f = stats.features()
+        self.rows = np.flatnonzero(np.abs(f).sum(axis=1) > 0)  # all-zero terms cost nothing
+        self.F = f[self.rows]
         self.y = energy_kwh[stats.trip]
+        self.y_trip = np.asarray(energy_kwh, dtype=float)
         self.log_w = stats.log_weight
         self.n_trips = stats.n_trips
+        self.n_group = 0
         specs = list(specs) + [("alr", 0.0, np.inf, -20.0, 20.0)] * self.n_alr
+        if groups is not None:  # group codes (n_trips,), 0..n_groups-1
+            if stats.marginalised:
+                raise ValueError("a group random effect needs one row per trip "
+                                 "(no trip marginalised over modes)")
+            g = np.asarray(groups, dtype=np.intp)
+            self.G = np.zeros((self.n_trips, int(g.max()) + 1))
+            self.G[np.arange(self.n_trips), g] = 1.0
+            self.n_g = self.G.sum(axis=0)
+            self.n_group = 1
+            specs.append(("normal", 0.0, prior.group_sd_scale, 0.0, 0.5))  # half-normal tau
         self.kind_log = np.array([s[0] == "lognormal" for s in specs])
         self.centre = np.array([s[1] for s in specs], dtype=float)
         self.sd = np.array([s[2] for s in specs], dtype=float)
@@ -82,14 +100,31 @@ class _LogPosterior:
         mx = logits.max(axis=1, keepdims=True)
         return logits - mx - np.log(np.exp(logits - mx).sum(axis=1, keepdims=True))
 
+    def _group_log_lik(self, theta: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """Relative residuals with a shared group effect, marginalised in closed form.
+
+        ``y_i / e_i - 1 = u_g + eps_i`` with ``u_g ~ N(0, tau^2)`` per group and
+        ``eps_i ~ N(0, sigma^2)``: each group's residuals are jointly normal
+        with covariance ``sigma^2 I + tau^2 1 1^T`` (Sherman-Morrison).
+        """
+        r = self.y_trip / e - 1.0
+        s2 = np.exp(2.0 * theta[:, -1])[:, None]
+        t2 = (theta[:, -2] ** 2)[:, None]
+        s1 = r @ self.G
+        sq = (r * r) @ self.G
+        den = s2 + self.n_g * t2
+        ll = -0.5 * (sq / s2 - t2 * s1 * s1 / (s2 * den))
+        ll -= 0.5 * ((self.n_g - 1.0) * np.log(s2) + np.log(den))
+        out = ll.sum(axis=1) - np.log(e).sum(axis=1) - 0.5 * self.n_trips * np.log(2 * np.pi)
+        return np.where((e > 0).all(axis=1), out, -np.inf)
+
     def log_lik(self, theta: np.ndarray) -> np.ndarray:
         v = self.values(theta)
-        inv = 1.0 / v["drivetrain_efficiency"]
-        s = v["regen_scale"]
-        cr, cda, b = v["rolling_resistance_coef"], v["drag_area_m2"], v["linear_drag_n_per_mps"]
-        coef = np.stack([cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s,
-                         v["aux_base_kw"], v["hvac_scale"], np.ones(len(theta))], axis=1)
+        coef = np.stack([np.broadcast_to(c, (len(theta),)) for c in coefficients(v)],
+                        axis=1)[:, self.rows]
         e = coef @ self.F
+        if self.n_group:
+            return self._group_log_lik(theta, e)
         log_sig = theta[:, -1]
         # log N(y | e, (sigma e)^2) = -(y/e - 1)^2 / (2 sigma^2) - log e - log sigma - log(2 pi)/2,
         # in place (hot path); e <= 0 has zero likelihood.

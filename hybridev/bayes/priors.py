@@ -9,11 +9,18 @@ import numpy as np
 
 from hybridev.physics.stats import STAT_PARAMS
 
-__all__ = ["DEFAULT_PARAMS", "PhysicsPrior"]
+__all__ = ["CLIMATE_PARAMS", "DEFAULT_PARAMS", "PhysicsPrior"]
 
 
 DEFAULT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency",
                   "aux_base_kw", "regen_scale")
+"""Parameters calibrated by default: road load, efficiency, base auxiliary
+power and regeneration."""
+
+CLIMATE_PARAMS = ("heating_scale", "cooling_scale", "warmup_scale")
+"""Climate scales (steady heating power, steady cooling power, warm-up energy) that
+:func:`hybridev.bayes.sampler.calibrate_physics` adds to the sampled set by
+default when the vehicle uses the continuous climate model."""
 
 
 @dataclass(frozen=True)
@@ -21,10 +28,17 @@ class PhysicsPrior:
     """Prior of the calibrated physics parameters, centred on the nominal vehicle.
 
     Widths are the project's choice (stated here; change them with
-    :func:`dataclasses.replace`): coast-down and data-sheet values of
-    ``C_dA`` and ``C_r`` are rarely more than 20-30 % off for a real car
-    (tyres, load, wind), efficiency is known to a few points, auxiliary
-    load only to a factor of ~1.6.
+    :func:`dataclasses.replace`): data-sheet values of ``C_dA`` and ``C_r``
+    are rarely more than 20-30 % off for a real car (tyres, load, wind);
+    a measured coast-down (``vehicle.road_load_source == "coastdown"``,
+    set by :meth:`~hybridev.physics.params.VehicleParams.from_coastdown`)
+    pins them to ~10 % (repeatability of coast-down tests and the spread of
+    road conditions: wind, surface, tyre temperature), so that the climate
+    and auxiliary terms take up what the road load does not explain.
+    Efficiency is known to a few points, auxiliary load only to a factor of
+    ~1.6, the climate load (cabin ``UA``, set point) to a factor of ~1.6
+    and the warm-up energy (cabin heat capacity, soak state: a car parked in
+    a garage needs less) to a factor of ~2.
 
     Parameters
     ----------
@@ -38,9 +52,25 @@ class PhysicsPrior:
         ``eta_d ~ N(nominal, sd)`` truncated to ``efficiency_bounds`` (open).
     efficiency_bounds : tuple of 2 float
     aux_log_sd : float
-        ``log P_b ~ N(log nominal, sd)``; needs a nominal ``P_b > 0``.
+        ``log P_b ~ N(log nominal, sd)``; needs a nominal ``P_b > 0``. The same
+        for the drive loss ``drive_loss_kw``.
     hvac_log_sd : float
-        ``log hvac_scale ~ N(0, sd)``; the scale multiplies all four HVAC bands.
+        ``log hvac_scale ~ N(0, sd)``; the scale multiplies the climate power
+        (all four HVAC bands, or the continuous model's steady power); the
+        same prior for ``heating_scale`` and ``cooling_scale`` (the heating
+        and cooling parts alone). 0.8: 99 % of the prior within a factor 7.9
+        either way, because how much of the modelled load a driver uses
+        (air vs seat heating, A/C vs open windows, set point) varies that
+        much between cars and drivers (AAA 2019: HVAC on/off changes cold
+        range by 29 points).
+    warmup_log_sd : float
+        ``log warmup_scale ~ N(0, sd)``; the scale multiplies the warm-up energy.
+    coastdown_log_sd : float
+        Replaces ``drag_area_log_sd`` and ``rolling_resistance_log_sd`` when
+        the vehicle's road load comes from a coast-down.
+    group_sd_scale : float
+        Prior of the day/session random effect's relative sd ``tau`` (when
+        the calibration has ``groups``): half-normal with this scale.
     regen_scale_sd : float
         ``s ~ N(1, sd)`` truncated to ``(0, 1 / max eta_r)`` so that no
         profile regenerates more than the braking energy.
@@ -61,14 +91,18 @@ class PhysicsPrior:
     efficiency_sd: float = 0.05
     efficiency_bounds: tuple[float, float] = (0.5, 1.0)
     aux_log_sd: float = 0.5
-    hvac_log_sd: float = 0.5
+    hvac_log_sd: float = 0.8
+    warmup_log_sd: float = 0.7
+    coastdown_log_sd: float = 0.10
+    group_sd_scale: float = 0.05
     regen_scale_sd: float = 0.2
     noise_rel_bounds: tuple[float, float] = (1e-3, 0.5)
     source: str = field(default="hybridev defaults (see class docstring)", compare=False)
 
     def __post_init__(self) -> None:
         for name in ("drag_area_log_sd", "rolling_resistance_log_sd", "linear_drag_sd_n_per_mps",
-                     "efficiency_sd", "aux_log_sd", "hvac_log_sd", "regen_scale_sd"):
+                     "efficiency_sd", "aux_log_sd", "hvac_log_sd", "regen_scale_sd",
+                     "warmup_log_sd", "coastdown_log_sd", "group_sd_scale"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"PhysicsPrior.{name}={v!r} is outside the allowed range "
@@ -84,18 +118,26 @@ class PhysicsPrior:
         object.__setattr__(self, "efficiency_bounds", (lo, hi))
         object.__setattr__(self, "noise_rel_bounds", (nlo, nhi))
 
-    def spec(self, name: str, nominal: float, eta_r_max: float) -> tuple:
-        """``(kind, centre, sd, lo, hi)`` of one parameter's prior (natural units)."""
-        if name in ("drag_area_m2", "rolling_resistance_coef", "aux_base_kw"):
+    def spec(self, name: str, nominal: float, eta_r_max: float, *,
+             coastdown: bool = False) -> tuple:
+        """``(kind, centre, sd, lo, hi)`` of one parameter's prior (natural units).
+
+        ``coastdown``: the road load was measured (tighter ``C_dA``, ``C_r``).
+        """
+        if name in ("drag_area_m2", "rolling_resistance_coef", "aux_base_kw", "drive_loss_kw"):
             sd = {"drag_area_m2": self.drag_area_log_sd,
                   "rolling_resistance_coef": self.rolling_resistance_log_sd,
-                  "aux_base_kw": self.aux_log_sd}[name]
+                  "aux_base_kw": self.aux_log_sd, "drive_loss_kw": self.aux_log_sd}[name]
+            if coastdown and name != "aux_base_kw":
+                sd = self.coastdown_log_sd
             if not nominal > 0:
                 raise ValueError(f"{name}={nominal!r}: a lognormal prior needs a nominal value "
                                  "> 0; set it on the vehicle or leave the parameter out")
             return "lognormal", float(np.log(nominal)), sd, 0.0, np.inf
-        if name == "hvac_scale":
+        if name in ("hvac_scale", "heating_scale", "cooling_scale"):
             return "lognormal", 0.0, self.hvac_log_sd, 0.0, np.inf
+        if name == "warmup_scale":
+            return "lognormal", 0.0, self.warmup_log_sd, 0.0, np.inf
         if name == "linear_drag_n_per_mps":
             return "normal", nominal, self.linear_drag_sd_n_per_mps, 0.0, np.inf
         if name == "drivetrain_efficiency":

@@ -43,7 +43,7 @@ import pandas as pd
 
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
-from hybridev.bayes.priors import DEFAULT_PARAMS, PhysicsPrior
+from hybridev.bayes.priors import CLIMATE_PARAMS, DEFAULT_PARAMS, PhysicsPrior
 from hybridev.core.checks import check_seed
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 from hybridev.data.measured import validate_measured_trips
@@ -96,7 +96,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                       progress: bool = False, prior: PhysicsPrior | None = None,
                       missing_mode: str | DrivingProfile = "marginalize",
                       max_steps: int = 20000, trace_steps: int = 1000, trace_seed: int = 0,
-                      refine_sign: bool = True) -> PhysicsPosterior:
+                      refine_sign: bool = True, groups="auto",
+                      climate_params: bool | None = None) -> PhysicsPosterior:
     """Sample the posterior of physics parameters given measured trip energies.
 
     Parameters
@@ -131,6 +132,24 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         ``n_steps`` and ``seed``) for trips without a logged trace.
     refine_sign : bool
         Rebuild the statistics' sign split at the MAP before sampling.
+    climate_params : bool, optional
+        Also sample :data:`~hybridev.bayes.priors.CLIMATE_PARAMS` (climate
+        power and warm-up scales) when not in ``params``. Default: yes for a
+        vehicle with the continuous climate model (its climate load is the
+        least known part of a new car), no for the paper's band model.
+    groups : "auto", str, array_like (n_trips,) or None
+        Trips that share a day or session share part of their error (same
+        weather, traffic, driver, tyre pressure). With groups the likelihood
+        gets a group random effect ``u_g ~ N(0, tau^2)`` on the relative
+        residual (``tau`` sampled, half-normal prior), so that correlated
+        trips do not overstate certainty; ``noise_rel`` of the posterior is
+        then the total sd ``sqrt(sigma^2 + tau^2)`` of a trip on a new day.
+        ``"auto"`` (default): the ``date`` column if the table has one, else
+        ``session_group``, else none; a column name; one label per trip;
+        ``None``: independent trips. Missing labels form their own groups.
+        Trips whose mode is marginalised (no label, no logged trace) cannot
+        share a group effect: ``"auto"`` then falls back to independent trips
+        and explicit groups raise a ``ValueError``.
 
     Returns
     -------
@@ -154,20 +173,25 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     veh = vehicle or VehicleParams()
     pr = prior or PhysicsPrior()
     names = tuple(params)
+    if climate_params is None:
+        climate_params = veh.climate_model == "continuous"
+    if climate_params:
+        names += tuple(n for n in CLIMATE_PARAMS if n not in names)
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"params={params!r} must be distinct names from {list(STAT_PARAMS)}")
     for n in names:
         if n not in STAT_PARAMS:
             raise ValueError(f"params has unknown parameter {n!r}; allowed: {list(STAT_PARAMS)}")
-    infer = isinstance(missing_mode, str) and missing_mode == "infer"
+    infer = want_infer = isinstance(missing_mode, str) and missing_mode == "infer"
     n_alr = 2 if infer else 0
-    ndim = len(names) + n_alr + 1
-    if n_walkers < 2 * ndim:
+    ndim = len(names) + n_alr + 2  # + group sd (if any) + noise; checked again below
+    if n_walkers < 2 * (ndim - 1):
         raise ValueError(f"n_walkers={n_walkers!r} is outside the allowed range "
-                         f"[{2 * ndim}, inf) for {ndim} sampled dimension(s)")
+                         f"[{2 * (ndim - 1)}, inf) for {ndim - 1} sampled dimension(s)")
     if n_steps is not None and int(n_steps) < 1:
         raise ValueError(f"n_steps={n_steps!r} is outside the allowed range [1, inf)")
     trips, traces = _prepare(measured_trips, veh, timeseries)
+    codes = _group_codes(trips, groups)
     y = trips["energy_kwh"].to_numpy(float)
     if np.any(y <= 0):
         raise ValueError(f"energy_kwh={y[y <= 0][0]!r}: the relative-noise likelihood needs "
@@ -176,16 +200,34 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
 
     def build(v):
         return trip_stats(trips, v, traces=traces, n_steps=trace_steps, seed=trace_seed,
-                          missing_mode="marginalize" if infer else missing_mode)
+                          missing_mode="marginalize" if want_infer else missing_mode)
 
     stats = build(veh)
+    unlabelled = ("mode" not in trips.columns
+                  or bool((trips["mode"].isna() | (trips["mode"].astype(str) == "")).any()))
+    if infer and unlabelled and not stats.marginalised:
+        infer, n_alr = False, 0  # every unlabelled trip has a logged trace: nothing to infer
+    if codes is not None and stats.marginalised:
+        # A trip whose mode is a mixture has no single energy for the shared day effect.
+        if isinstance(groups, str) and groups == "auto":
+            codes = None
+        else:
+            raise ValueError("groups need trips with a known mode or a logged trace; some "
+                             "trips are a mixture over modes (missing_mode="
+                             f"{missing_mode!r}): label them or pass groups=None")
+    n_group = 0 if codes is None else 1
+    ndim = len(names) + n_alr + n_group + 1
+    if n_walkers < 2 * ndim:
+        raise ValueError(f"n_walkers={n_walkers!r} is outside the allowed range "
+                         f"[{2 * ndim}, inf) for {ndim} sampled dimension(s)")
     nominal = PhysicsPosterior.nominal_values(veh)
-    specs = [pr.spec(n, nominal[n], float(stats.eta_r.max())) for n in names]
+    cd = veh.road_load_source == "coastdown"
+    specs = [pr.spec(n, nominal[n], float(stats.eta_r.max()), coastdown=cd) for n in names]
     fixed = {n: nominal[n] for n in STAT_PARAMS if n not in names}
     scale = np.array([s[2] * (np.exp(s[1]) if s[0] == "lognormal" else 1.0) for s in specs]
-                     + [1.0] * (n_alr + 1))
-    x0 = np.r_[[nominal[n] for n in names], np.zeros(n_alr)]
-    logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer)
+                     + [1.0] * n_alr + [pr.group_sd_scale] * n_group + [1.0])
+    x0 = np.r_[[nominal[n] for n in names], np.zeros(n_alr), [0.5 * pr.group_sd_scale] * n_group]
+    logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer, codes)
     with np.errstate(all="ignore"):
         s0 = float(np.sqrt(np.mean((y / energy_from_stats(stats) - 1.0) ** 2)))
     s0 = np.clip(s0 if np.isfinite(s0) else 0.1,
@@ -203,7 +245,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
             ref = veh
         if ref is not veh:
             stats = build(ref)
-            logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer)
+            logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer, codes)
             theta, cov = _map_and_cov(logpost, theta, scale)
     if not np.isfinite(logpost(theta[None, :])[0]):
         raise ValueError("the posterior is zero everywhere the optimiser looked: the physics "
@@ -236,10 +278,38 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
             if done >= need or done >= max_steps:
                 break
             chunk = int(min(max(need - done, 200), max_steps - done))
+    mm_out = ("marginalize" if isinstance(missing_mode, str) and missing_mode == "infer"
+              and not infer else missing_mode)
     return PhysicsPosterior.from_sampler(
         sampler, names, vehicle=veh, reference_vehicle=ref, prior=pr, map_theta=theta,
-        missing_mode=missing_mode, trace_steps=trace_steps, trace_seed=trace_seed,
-        elapsed_s=time.perf_counter() - t0)
+        missing_mode=mm_out, trace_steps=trace_steps, trace_seed=trace_seed,
+        elapsed_s=time.perf_counter() - t0, n_group=n_group)
+
+
+def _group_codes(trips: pd.DataFrame, groups) -> np.ndarray | None:
+    """Integer group code per trip (missing labels: a group each), or None."""
+    if groups is None:
+        return None
+    if isinstance(groups, str):
+        if groups == "auto":
+            col = next((c for c in ("date", "session_group") if c in trips.columns), None)
+            if col is None:
+                return None
+            groups = col
+        if groups not in trips.columns:
+            raise ValueError(f"groups={groups!r} is not a column of the measured trips; "
+                             f"allowed: 'auto', None, a column name or one label per trip")
+        labels = trips[groups]
+    else:
+        arr = np.asarray(groups, dtype=object).reshape(-1)
+        if len(arr) != len(trips):
+            raise ValueError(f"groups has {len(arr)} labels; allowed: one per measured "
+                             f"trip ({len(trips)})")
+        labels = pd.Series(arr, index=trips.index)
+    codes, _ = pd.factorize(labels.astype(object))
+    miss = codes < 0
+    codes[miss] = codes.max() + 1 + np.arange(int(miss.sum()))
+    return codes
 
 
 def simulate_measured(trips: pd.DataFrame, vehicle: VehicleParams | None = None,

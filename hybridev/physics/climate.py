@@ -1,9 +1,12 @@
 """Auxiliary and climate (HVAC) power.
 
-The paper's model: a base auxiliary load plus one of four constant HVAC powers
+The paper's model (``VehicleParams.climate_model == "paper_bands"``, the
+class default): a base auxiliary load plus one of four constant HVAC powers
 chosen by the ambient temperature band, plus the driving profile's auxiliary
 power; all in kW, constant over the trip, so climate energy follows the trip's
-duration.
+duration. With ``climate_model == "continuous"`` the HVAC power is the steady
+power of :func:`hybridev.physics.thermal.steady_climate_kw` (plus a warm-up
+energy per trip, see that module).
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import numpy as np
 
 from hybridev.physics.kinematics import profile_table
 from hybridev.physics.params import DrivingProfile, ProfileLike, VehicleParams, get_profile
+from hybridev.physics.thermal import steady_climate_kw
 
 __all__ = ["aux_power_kw", "hvac_power_kw"]
 
@@ -24,7 +28,8 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
     temperature_c : float or array_like, degC
         Ambient temperature.
     vehicle : VehicleParams, optional
-        Supplies the four band powers ``hvac_kw``.
+        Supplies the four band powers ``hvac_kw`` (paper preset), or the
+        continuous model's parameters (``climate_model="continuous"``).
 
     Returns
     -------
@@ -34,12 +39,16 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
     --------
     >>> hvac_power_kw([-5, 10, 20, 25, 32]).tolist()
     [2.0, 1.0, 0.5, 0.5, 2.5]
+    >>> hvac_power_kw([-5, 10, 20], VehicleParams(climate_model="continuous")).round(2).tolist()
+    [2.46, 0.81, 0.0]
     """
     v = vehicle or VehicleParams()
     t = np.asarray(temperature_c, dtype=float)
     if not np.all(np.isfinite(t)):
         raise ValueError(f"temperature_c={temperature_c!r} contains NaN or infinite values; "
                          "allowed range: finite degC")
+    if v.climate_model == "continuous":
+        return steady_climate_kw(t, v)
     cold, cool, mild, hot = v.hvac_kw
     return np.where(t < 0.0, cold, np.where(t < 15.0, cool, np.where(t <= 25.0, mild, hot)))
 
@@ -59,6 +68,10 @@ def _profile_values(profile: ProfileLike, n_trips: int | None) -> tuple[np.ndarr
 def aux_power_kw(temperature_c, profile: ProfileLike = "normal",
                  vehicle: VehicleParams | None = None) -> np.ndarray:
     """Auxiliary power ``P_b + P_c(T) + P_m(mode)`` in kW.
+
+    With the continuous climate model ``P_c`` is the steady climate power;
+    the per-trip warm-up energy and the drive loss while moving are not
+    included (see :mod:`hybridev.physics.forces`).
 
     Examples
     --------

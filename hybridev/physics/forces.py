@@ -15,7 +15,12 @@ Per interval:
 * regeneration ``P_r = eta_r * max(-P_w, 0)``: only a fraction of the
   *negative wheel power* returns to the battery, never more than the braking
   energy that was available;
-* auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``;
+* auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``; with the continuous climate
+  model (:mod:`hybridev.physics.thermal`) ``P_c`` is the steady climate power,
+  the trip's warm-up energy is spread evenly over its duration, and the
+  cold-weather factors scale ``mult`` and ``eta_r``; the drive loss
+  ``P_d`` (``drive_loss_kw``) is added while the car moves (interval-mean
+  speed above 0.5 m/s);
 * battery power ``P = P_t + P_a - P_r``, energy ``E = sum(P dt) / 3600`` kWh.
 
 Every function is vectorised over leading trip axes: ``speed_mps`` is
@@ -29,6 +34,7 @@ import numpy as np
 
 from hybridev.physics.climate import _profile_values, hvac_power_kw
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
+from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 
 __all__ = [
     "soc_trajectory",
@@ -123,6 +129,16 @@ def _wheel_power_w(v: np.ndarray, dt, veh: VehicleParams, th) -> np.ndarray:
     return p
 
 
+MOVING_MPS = 0.5
+"""Interval-mean speed above which the car counts as moving (drive losses), m/s."""
+
+
+def _moving_steps(v: np.ndarray) -> np.ndarray:
+    """Number of moving intervals per trace, shape ``v.shape[:-1] + (1,)``."""
+    vm = v[..., 1:] + v[..., :-1]
+    return np.count_nonzero(vm > 2.0 * MOVING_MPS, axis=-1)[..., None]
+
+
 def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> np.ndarray:
     """Net battery energy (kWh) per trace from wheel power in W; overwrites ``pw_w``.
 
@@ -138,14 +154,25 @@ def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> n
 
 
 def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
-                   v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column."""
+                   v: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column.
+
+    With the continuous climate model the cold-weather factors scale ``mult``
+    and ``eta_r``, and the warm-up energy is spread evenly over the trip as
+    extra auxiliary power.
+    """
     n_trips = v.shape[0] if v.ndim == 2 else None
     mult, eta_r, mode_kw = _profile_values(profile, n_trips)
     t = _per_trip(temperature_c, v, "temperature_c")
     aux = veh.aux_base_kw + hvac_power_kw(t, veh) + _per_trip(mode_kw, v, "profile")
-    return (_per_trip(mult, v, "profile") / veh.drivetrain_efficiency,
-            _per_trip(eta_r, v, "profile"), aux)
+    mult = _per_trip(mult, v, "profile")
+    eta_r = _per_trip(eta_r, v, "profile")
+    if veh.climate_model == "continuous":
+        trac, regen = cold_factors(t, veh)
+        mult, eta_r = mult * trac, eta_r * regen
+        dur_s = dt * (v.shape[-1] - 1)
+        aux = aux + warmup_energy_kwh(t, dur_s, veh) / (dur_s / 3600.0)
+    return mult / veh.drivetrain_efficiency, eta_r, aux
 
 
 def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -210,7 +237,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
     pw = _wheel_power_w(v, dt, veh, th)
     pw *= 1e-3
     out = np.maximum(pw, 0.0) * mult_eta
@@ -218,6 +245,8 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     pw *= eta_r  # regeneration, <= 0
     out += pw
     out += aux
+    if veh.drive_loss_kw:
+        out += veh.drive_loss_kw * ((v[..., 1:] + v[..., :-1]) > 2.0 * MOVING_MPS)
     return out
 
 
@@ -256,8 +285,11 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v)
-    return _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
+    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
+    e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
+    if veh.drive_loss_kw:
+        e = e + (veh.drive_loss_kw * _moving_steps(v) * (dt / 3600.0))[..., 0]
+    return e
 
 
 def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | None = None,

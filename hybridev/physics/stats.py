@@ -3,6 +3,7 @@
 The battery energy of a trace (:mod:`hybridev.physics.forces`) is
 
     E = mult / eta_d * sum_{P_w > 0} P_w dt + s eta_r * sum_{P_w < 0} P_w dt + (P_b + h P_c + P_m) T
+        + w E_warm
 
 with wheel power ``P_w = (C_r m g cos(theta) + b v + rho C_dA v^2 / 2 + m g sin(theta) + m a) v``.
 For a *fixed* split of the intervals into driving (``P_w > 0``) and braking
@@ -14,7 +15,10 @@ the HVAC scale ``h`` (1 nominally), so per trip and per sign it suffices to keep
 * ``lin = sum v^2 dt`` (per N/(m/s) of ``b``),
 * ``rest = sum (m g sin(theta) + m a) v dt`` (grade and inertia),
 
-all in kWh, plus the duration ``T`` and the HVAC and mode powers. Then
+all in kWh, plus the duration ``T``, the HVAC and mode powers and the warm-up
+energy ``E_warm`` (``w`` = ``warmup_scale``, 1 nominally; zero for the paper's
+climate model). The cold-weather factors of the continuous climate model are
+folded into ``mult`` and ``eta_r``. Then
 :func:`energy_from_stats` evaluates thousands of parameter draws against all
 trips in one broadcast.
 
@@ -56,12 +60,14 @@ from hybridev.physics.params import VehicleParams
 __all__ = [
     "STAT_PARAMS",
     "PhysicsStats",
+    "coefficients",
     "energy_from_stats",
     "row_energy",
 ]
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
-               "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale")
+               "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale",
+               "warmup_scale", "heating_scale", "cooling_scale", "drive_loss_kw")
 """Parameters :func:`energy_from_stats` can vary."""
 
 _J_PER_KWH = 3.6e6
@@ -93,6 +99,19 @@ class PhysicsStats:
         Vehicle that fixed the sign split; default values of the parameters.
     max_speed_kmh : numpy.ndarray, shape (n_rows,), km/h, optional
         Highest speed of each row's trace.
+    warmup_kwh : numpy.ndarray, shape (n_rows,), kWh, optional
+        Cabin (and battery) warm-up energy at the trip's start
+        (:func:`hybridev.physics.thermal.warmup_energy_kwh`; ``warmup_scale``
+        multiplies it); zero for the paper's climate model. With the
+        continuous model ``hvac_kw`` is the trip's mean steady climate power
+        and ``mult``/``eta_r`` include the cold-weather factors.
+    cooling_kw : numpy.ndarray, shape (n_rows,), kW, optional
+        The cooling (A/C) part of ``hvac_kw``; the rest is heating.
+        ``cooling_scale`` and ``heating_scale`` multiply the two parts
+        (zero for the paper's bands, which ``heating_scale`` then scales).
+    moving_h : numpy.ndarray, shape (n_rows,), h, optional
+        Time with interval-mean speed above 0.5 m/s (``drive_loss_kw``
+        multiplies it).
     """
 
     roll_pos: np.ndarray
@@ -113,6 +132,14 @@ class PhysicsStats:
     n_trips: int
     vehicle: VehicleParams
     max_speed_kmh: np.ndarray | None = None
+    warmup_kwh: np.ndarray | None = None
+    cooling_kw: np.ndarray | None = None
+    moving_h: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("warmup_kwh", "cooling_kw", "moving_h"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(len(self.trip)))
 
     @property
     def n_rows(self) -> int:
@@ -124,16 +151,18 @@ class PhysicsStats:
         return self.n_rows != self.n_trips
 
     def features(self) -> np.ndarray:
-        """Design matrix ``(11, n_rows)`` with ``E = coefficients @ features`` (kWh).
+        """Design matrix ``(14, n_rows)`` with ``E = coefficients @ features`` (kWh).
 
         The matching coefficients are ``[C_r/eta_d, C_dA/eta_d, b/eta_d, 1/eta_d,
-        s C_r, s C_dA, s b, s, P_b, hvac_scale, 1]``.
+        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool, P_d]`` with
+        ``h`` = ``hvac_scale`` (:func:`coefficients`).
         """
         return np.stack([
             self.mult * self.roll_pos, self.mult * self.aero_pos, self.mult * self.lin_pos,
             self.mult * self.rest_pos, self.eta_r * self.roll_neg, self.eta_r * self.aero_neg,
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
-            self.hvac_kw * self.duration_h, self.mode_kw * self.duration_h])
+            (self.hvac_kw - self.cooling_kw) * self.duration_h, self.mode_kw * self.duration_h,
+            self.warmup_kwh, self.cooling_kw * self.duration_h, self.moving_h])
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -156,13 +185,14 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
     vals = {"drag_area_m2": v.drag_area_m2, "rolling_resistance_coef": v.rolling_resistance_coef,
             "linear_drag_n_per_mps": v.linear_drag_n_per_mps,
             "drivetrain_efficiency": v.drivetrain_efficiency, "aux_base_kw": v.aux_base_kw,
-            "regen_scale": 1.0, "hvac_scale": 1.0}
+            "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0,
+            "heating_scale": 1.0, "cooling_scale": 1.0, "drive_loss_kw": v.drive_loss_kw}
     if isinstance(params, VehicleParams):
         params = {"drag_area_m2": params.drag_area_m2,
                   "rolling_resistance_coef": params.rolling_resistance_coef,
                   "linear_drag_n_per_mps": params.linear_drag_n_per_mps,
                   "drivetrain_efficiency": params.drivetrain_efficiency,
-                  "aux_base_kw": params.aux_base_kw}
+                  "aux_base_kw": params.aux_base_kw, "drive_loss_kw": params.drive_loss_kw}
     elif params is None:
         params = {}
     elif not isinstance(params, Mapping):
@@ -176,27 +206,32 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
     return vals
 
 
+def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
+    """The 14 coefficients of :meth:`PhysicsStats.features` from parameter values.
+
+    ``p`` maps every name of :data:`STAT_PARAMS` to a scalar or array; the
+    entries broadcast together.
+    """
+    inv = 1.0 / p["drivetrain_efficiency"]
+    cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
+    s, h = p["regen_scale"], p["hvac_scale"]
+    return (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
+            h * p["heating_scale"], np.ones_like(inv), p["warmup_scale"],
+            h * p["cooling_scale"], p["drive_loss_kw"])
+
+
 def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
     """Energy of every row (trip, or trip and mode), shape ``broadcast(params) + (n_rows,)``, kWh.
 
     Same parameters as :func:`energy_from_stats`, without the mixture mean.
     """
     p = _param_values(stats, params)
-    inv = 1.0 / p["drivetrain_efficiency"]
-    cr, cda, b = p["rolling_resistance_coef"], p["drag_area_m2"], p["linear_drag_n_per_mps"]
-    s = p["regen_scale"]
-    coef = (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
-            p["hvac_scale"], np.ones(()))
+    coef = coefficients(p)
     shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
     if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
         return (c[..., 0, :] if shape else c) @ stats.features()
-    return (stats.mult * inv * (cr * stats.roll_pos + cda * stats.aero_pos + b * stats.lin_pos
-                                + stats.rest_pos)
-            + stats.eta_r * p["regen_scale"] * (cr * stats.roll_neg + cda * stats.aero_neg
-                                               + b * stats.lin_neg + stats.rest_neg)
-            + (p["aux_base_kw"] + p["hvac_scale"] * stats.hvac_kw + stats.mode_kw)
-            * stats.duration_h)
+    return sum(c * f for c, f in zip(coef, stats.features(), strict=True))
 
 
 def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
@@ -210,8 +245,9 @@ def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
         trips, e.g. shape ``(n_draws, 1)``. Missing ones take their value in
         ``stats.vehicle`` (``regen_scale``, ``hvac_scale``: 1). A
         VehicleParams supplies ``C_dA``, ``C_r``, ``b``, ``eta_d`` and
-        ``P_b``; mass, HVAC bands and air density always come from the
-        statistics.
+        ``P_b``; mass, climate model and air density always come from the
+        statistics (``hvac_scale`` and ``warmup_scale`` rescale their climate
+        terms).
 
     Returns
     -------

@@ -10,9 +10,11 @@ import numpy as np
 import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.forces import MOVING_MPS, _moving_steps
 from hybridev.physics.kinematics import profile_table
-from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
+from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
+from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
 from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import _blocks
 
@@ -41,18 +43,37 @@ def _profile_consts(profile, n: int):
 
 
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
-              log_weight=None, n_trips=None, max_speed_kmh=None) -> PhysicsStats:
+              log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
+              start_temperature_c=None, cooling_kw=None, moving_s=None) -> PhysicsStats:
+    """Statistics from the sums; climate terms from the per-row temperature.
+
+    ``climate_kw`` (mean steady climate power, e.g. from per-step logged
+    temperatures) and ``start_temperature_c`` (warm-up) default to the values
+    at ``temperature_c``.
+    """
     n = len(duration_s)
     mult, eta_r, mode_kw = _profile_consts(profile, n)
-    hvac = np.broadcast_to(hvac_power_kw(temperature_c, veh), (n,))
+    t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
+    hvac = np.broadcast_to(hvac_power_kw(t, veh) if climate_kw is None else climate_kw, (n,))
+    duration_s = np.asarray(duration_s, float)
+    warm = np.zeros(n)
+    cool = np.zeros(n)
+    if veh.climate_model == "continuous":
+        cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
+        trac, regen = cold_factors(t, veh)
+        mult, eta_r = mult * trac, eta_r * regen
+        t0 = t if start_temperature_c is None else start_temperature_c
+        warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh), (n,)).copy()
     kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
     kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
     return PhysicsStats(
-        **kw, duration_h=np.asarray(duration_s, float) / 3600.0, hvac_kw=hvac.copy(),
+        **kw, duration_h=duration_s / 3600.0, hvac_kw=np.array(hvac, dtype=float),
         mode_kw=mode_kw,
         mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
         log_weight=np.zeros(n) if log_weight is None else log_weight,
-        n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh)
+        n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
+        warmup_kwh=warm, cooling_kw=cool,
+        moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -107,7 +128,8 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
-                     max_speed_kmh=v.max(axis=1) * 3.6)
+                     max_speed_kmh=v.max(axis=1) * 3.6,
+                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0])
 
 
 def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
@@ -173,8 +195,11 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     vehicle : VehicleParams, optional
     profile : DrivingProfile, str, or sequence of them (n_trips,)
     temperature_c : float or array_like (n_trips,), degC, optional
-        Sets the HVAC band; default: the time mean of the logged temperature,
-        else 20 degC.
+        Sets the HVAC band (paper preset), the warm-up and the cold-weather
+        factors; default: the time mean of the logged temperature, else 20
+        degC. With the continuous climate model and a logged temperature, the
+        steady climate power is the time mean over the logged per-step
+        temperatures.
 
     Returns
     -------
@@ -199,7 +224,32 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     vmax = np.zeros(n)
     np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
-    return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6)
+    heat, cool = _logged_climate_kw(traces, veh, start, trip, dt)
+    vm = v[start] + v[nxt]
+    moving = np.bincount(trip, np.where(vm > 2.0 * MOVING_MPS, dt, 0.0), minlength=n)
+    return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
+                     climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
+                     moving_s=moving)
+
+
+def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
+    """Time-mean steady (heating, cooling) power of each trip from its per-step temperature, kW.
+
+    Only for the continuous climate model and traces with a temperature
+    column; ``(None, None)`` otherwise (the trip temperature is then used).
+    """
+    if veh.climate_model != "continuous" or traces.temperature_c is None:
+        return None, None
+    tt = traces.temperature_c
+    n = len(traces)
+    tot = np.bincount(trip, dt, minlength=n)
+    fallback = climate_split_kw(traces.per_trip_mean(tt), veh)
+    out = []
+    for p, fb in zip(climate_split_kw(0.5 * (tt[start] + tt[start + 1]), veh), fallback,
+                     strict=True):
+        mean = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
+        out.append(np.where(tot > 0, mean, fb))
+    return tuple(out)
 
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
@@ -223,7 +273,10 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         Synthesis settings for trips without a logged trace.
     missing_mode : "marginalize", mode name or DrivingProfile
         Rows with no ``mode``: one row per profile of :data:`hybridev.PROFILES`
-        with equal weight (``"marginalize"``), or this one profile.
+        with equal weight (``"marginalize"``), or this one profile. With
+        ``"marginalize"``, an unlabelled trip *with a logged trace* gets one
+        row with :data:`~hybridev.physics.params.LOGGED_PROFILE` (its trace
+        already holds the driving style).
 
     Returns
     -------
@@ -243,8 +296,16 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     mode = (trips["mode"].astype(object) if "mode" in trips.columns
             else pd.Series([None] * n, index=trips.index, dtype=object))
     known = (mode.notna() & (mode.astype(str).str.len() > 0)).to_numpy()
+    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns else np.arange(n))
+    logged = np.zeros(n, dtype=bool)
+    if traces is not None and "trip_id" in trips.columns:
+        logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
+    mode = mode.to_numpy(object).copy()
     if isinstance(missing_mode, str) and missing_mode == "marginalize":
         alts, n_alt = list(PROFILES), len(PROFILES)
+        # a logged trace already holds the driving style: one row, no mode constants
+        mode[~known & logged] = LOGGED_PROFILE
+        known = known | logged
     else:
         alts, n_alt = [missing_mode], 1
     per_trip = np.where(known, 1, n_alt)
@@ -253,18 +314,18 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     k = np.arange(len(trip)) - first[trip]
     modes = np.empty(len(trip), dtype=object)
     kn = known[trip]
-    modes[kn] = mode.to_numpy(object)[trip[kn]]
+    modes[kn] = mode[trip[kn]]
     alt_arr = np.empty(n_alt, dtype=object)
     alt_arr[:] = alts
     modes[~kn] = alt_arr[k[~kn]]
     log_w = np.where(kn, 0.0, -np.log(n_alt))
     temp = trips["temperature_c"].to_numpy(float)
-    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns else np.arange(n))
-    logged = np.zeros(n, dtype=bool)
-    if traces is not None and "trip_id" in trips.columns:
-        logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
+    climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
+    cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
+               else np.zeros(len(trip)))
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
     duration = np.zeros(len(trip))
+    moving = np.zeros(len(trip))
     vmax = np.zeros(len(trip))
     rl = logged[trip]
     if rl.any():
@@ -275,6 +336,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             sums[name][rl] = getattr(sl, name)[src]
         duration[rl] = sl.duration_h[src] * 3600.0
         vmax[rl] = sl.max_speed_kmh[src]
+        climate[rl] = sl.hvac_kw[src]
+        moving[rl] = sl.moving_h[src] * 3600.0
+        cooling[rl] = sl.cooling_kw[src]
     if (~rl).any():
         cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
                 "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
@@ -290,7 +354,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
+            moving[dest[blk]] = s.moving_h * 3600.0
             vmax[dest[blk]] = s.max_speed_kmh
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
-                    n_trips=n, max_speed_kmh=vmax)
+                    n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
+                    moving_s=moving)

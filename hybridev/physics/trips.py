@@ -32,12 +32,14 @@ from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.forces import (
     _battery_energy_kwh,
     _interval_grade,
+    _moving_steps,
     _wheel_power_w,
     soc_trajectory,
     trace_power_kw,
 )
 from hybridev.physics.kinematics import _check_steps, profile_table, synthesize_speed_trace
 from hybridev.physics.params import PROFILES, VehicleParams
+from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.validation import validate_trips
 
 __all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces",
@@ -174,14 +176,20 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
     vmax = np.empty(n)
     prof = profile_table(t["mode"].to_numpy(object), n,
                          ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
-    mult_eta = (prof["efficiency_multiplier"] / veh.drivetrain_efficiency)[:, None]
-    eta_r = prof["regen_efficiency"][:, None]
-    aux = (veh.aux_base_kw + hvac_power_kw(t["temperature_c"].to_numpy(float), veh)
-           + prof["aux_kw"])[:, None]
+    temp = t["temperature_c"].to_numpy(float)
+    trac, regen = cold_factors(temp, veh)
+    mult_eta = (prof["efficiency_multiplier"] * trac / veh.drivetrain_efficiency)[:, None]
+    eta_r = (prof["regen_efficiency"] * regen)[:, None]
+    aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
+    warm = veh.climate_model == "continuous"
     for sl, v, dt, grade in _blocks(t, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
         energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
+        if warm:
+            energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh)
+        if veh.drive_loss_kw:
+            energy[sl] += veh.drive_loss_kw * _moving_steps(v)[:, 0] * dt / 3600.0
         vmax[sl] = v.max(axis=1) * 3.6
         if progress is not None:
             progress(min(sl.stop, n))

@@ -23,7 +23,8 @@ Conventions (documented choices):
 * Trips without a ``mode``: (b) uses ``missing_mode="infer"`` (mixture over the
   paper's profiles with learned weights) unless told otherwise, (a) uses the
   ``"normal"`` profile (:data:`hybridev.learning.features.UNKNOWN_MODE_PHYSICS`) or the
-  profile given to (b).
+  profile given to (b); with logged traces, unlabelled trips use the library's
+  ``logged`` profile in both (their trace holds the driving style).
 * Conformal calibration share of (c): at least 15 % (the model's default) and
   enough trips for the report's ``level`` to be reachable
   (``n_cal >= level / (1 - level)``, 9 trips at 90 %), at most 50 %. Higher
@@ -260,7 +261,7 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
 
     # (a) nominal physics, (b) calibrated physics: logged traces where available
     nominal_mode = mm if not (isinstance(mm, str) and mm in ("infer", "marginalize")) \
-        else UNKNOWN_MODE_PHYSICS
+        else ("marginalize" if held.traces is not None else UNKNOWN_MODE_PHYSICS)
     st = trip_stats(held.trips, veh, traces=held.traces, n_steps=post.trace_steps,
                     seed=post.trace_seed, missing_mode=nominal_mode)
     stats = post.stats_for(held.trips, held.traces)

@@ -128,7 +128,10 @@ Nominal physics has no interval.</p>
 {img["predicted"]}{img["reliability"]}
 <h2>Residuals</h2>{img["residuals"]}
 <h2>Calibrated physics parameters (training trips)</h2>
-{_table(params)}{img["parameters"]}
+{_table(params)}
+<p class="note">A median outside its prior's 99 % range is flagged as unphysical: the
+parameter compensates for something the physics does not model. Posterior correlations:</p>
+{_table(pd.DataFrame(s.get("correlations", [])))}{img["parameters"]}
 <p class="note">Corner plot of the posterior: red lines mark the nominal values, dashed lines the
 5, 50 and 95 % quantiles.</p>{img["corner"]}
 <h2>MCMC diagnostics</h2>

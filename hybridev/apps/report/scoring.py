@@ -109,6 +109,17 @@ def _confidence(y, p, u) -> dict:
             "auroc_confidence": _safe(M.auroc_worst, y, p, u, worst_frac=FLAG_FRACTION)}
 
 
+def _parameters(post) -> list[dict]:
+    """Posterior summary with each prior's 99 % range and whether the median is inside it."""
+    s = post.summary(0.9)
+    pc = post.prior_check(0.99)
+    s["prior 99 % lo"] = pc["prior_lo"]
+    s["prior 99 % hi"] = pc["prior_hi"]
+    s["inside prior 99 %"] = pd.Series({n: ("yes" if ok else "NO: unphysical")
+                                        for n, ok in pc["inside"].items()}, dtype=object)
+    return s.reset_index().to_dict(orient="records")
+
+
 def _flagged(pred: pd.DataFrame) -> list[dict]:
     n_flag = max(1, math.ceil(FLAG_FRACTION * len(pred)))
     err = (pred["energy_kwh_pred"] - pred["energy_kwh"]).abs()
@@ -178,7 +189,8 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         "metrics": {"nominal": _point(y, pred["energy_kwh_nominal"].to_numpy(float)),
                     "calibrated": cal, "hybrid": hyb},
         "labels": dict(MODEL_LABELS),
-        "parameters": post.summary(0.9).reset_index().to_dict(orient="records"),
+        "parameters": _parameters(post),
+        "correlations": post.correlations().round(3).reset_index().to_dict(orient="records"),
         "diagnostics": {k: d.get(k) for k in (
             "n_walkers", "n_steps", "burn_in", "thin", "n_samples", "acceptance_mean",
             "acceptance_min", "tau", "tau_max", "chain_length_tau", "converged", "elapsed_s")}

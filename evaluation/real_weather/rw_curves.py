@@ -1,0 +1,138 @@
+"""Consumption against ambient temperature: the model's curve for a compact BEV against
+published measurements, and a sensitivity grid (temperature, trip length, speed).
+
+Used by ``real_weather.py``; no data set is read here. The vehicle is the new-user
+default: ``VehicleParams.from_coastdown(A, B, C, mass_kg=...)`` with illustrative
+compact-car coefficients (not any data set's), continuous climate model, PTC heater.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from hybridev import VehicleParams, trace_energy_kwh
+from hybridev.physics.params import LOGGED_PROFILE
+
+__all__ = ["COMPACT", "PUBLISHED", "TOLERANCE", "curve_table", "cycle", "sensitivity"]
+
+COMPACT = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)
+"""An illustrative compact BEV (coast-down A/B/C of the size class, 1,700 kg test mass)."""
+
+TOLERANCE = 0.15
+"""Matched when |model ratio / published ratio - 1| <= 15 %: the published ratios
+themselves spread by about that much between cars and studies (AAA: 5 cars;
+Geotab: 4,200 vehicles, 102 models)."""
+
+F_TO_C = {20: -6.7, 72: 22.2, 75: 23.9, 95: 35.0}
+
+PUBLISHED = [
+    # (source, cycle, T (degC), T_ref (degC), consumption ratio vs T_ref, how derived)
+    ("AAA 2019 (5 BEVs, dynamometer, HVAC on)", "combined", F_TO_C[20], F_TO_C[75],
+     1 / (1 - 0.41), "range -41 % at 20 degF vs 75 degF"),
+    ("AAA 2019 (5 BEVs, dynamometer, HVAC on)", "combined", F_TO_C[95], F_TO_C[75],
+     1 / (1 - 0.17), "range -17 % at 95 degF vs 75 degF"),
+    ("AAA 2019 (HVAC off)", "combined_no_hvac", F_TO_C[20], F_TO_C[75],
+     1 / (1 - 0.12), "range -12 % at 20 degF, HVAC off"),
+    ("AAA 2019 (HVAC off)", "combined_no_hvac", F_TO_C[95], F_TO_C[75],
+     1 / (1 - 0.04), "range -4 % at 95 degF, HVAC off"),
+    ("ANL APRF, Nissan Leaf (Lohse-Busch et al. 2013)", "city", F_TO_C[20], F_TO_C[72],
+     2.0, "'nearly double' on UDDS at 20 degF, heater on"),
+    ("ANL APRF, Nissan Leaf (Lohse-Busch et al. 2013)", "highway", F_TO_C[20], F_TO_C[72],
+     1.4, "+40 % on HWFET at 20 degF, heater on"),
+    ("Geotab 2020 (4,200 EVs, 5.2 M trips)", "combined", -15.0, 21.5, 1.15 / 0.54,
+     "54 % of rated range at -15 degC vs 115 % at 21.5 degC"),
+    ("Geotab 2020 (4,200 EVs, 5.2 M trips)", "combined", 10.0, 21.5, 1.15 / 1.00,
+     ">= 100 % of rated range from 10 degC, 115 % at 21.5 degC"),
+]
+"""Published measured points (see real_weather.md for the references)."""
+
+
+def _phase(v_kmh: float, accel_s: float, cruise_s: float, brake_s: float, stop_s: float):
+    v = v_kmh / 3.6
+    return np.concatenate([np.linspace(0, v, int(accel_s) + 1)[1:], np.full(int(cruise_s), v),
+                           np.linspace(v, 0, int(brake_s) + 1)[1:], np.zeros(int(stop_s))])
+
+
+def cycle(kind: str, minutes: float | None = None) -> np.ndarray:
+    """A 1 Hz speed trace (m/s) of a city, highway or combined drive.
+
+    City: stop-and-go to 30-55 km/h (about 28 km/h mean, like the UDDS);
+    highway: ramps and cruise at 80-110 km/h (about 78 km/h mean, like the
+    HWFET); combined (also used for the fleet-average Geotab points): city then
+    highway, 55/45 by time. ``minutes`` repeats
+    or cuts the pattern to that duration.
+    """
+    city = np.concatenate([_phase(v, a, c, b, s) for v, a, c, b, s in
+                           ((35, 8, 30, 6, 15), (50, 12, 45, 9, 20), (30, 7, 20, 6, 10),
+                            (55, 14, 60, 10, 25), (40, 10, 35, 8, 18))])
+    hwy = np.concatenate([_phase(100, 25, 240, 0, 0), np.full(120, 110 / 3.6),
+                          np.linspace(110, 80, 31)[1:] / 3.6, np.full(200, 80 / 3.6),
+                          np.linspace(80, 0, 21)[1:] / 3.6, np.zeros(10)])
+    base = {"city": city, "highway": hwy}.get(kind)
+    if kind.startswith("combined"):
+        c = np.tile(city, 5)
+        base = np.concatenate([c, np.tile(hwy, max(1, round(0.45 / 0.55 * len(c) / len(hwy))))])
+    if base is None:
+        raise ValueError(f"kind={kind!r}; allowed: city, highway, combined")
+    if minutes is None:
+        minutes = {"city": 23.0, "highway": 13.0}.get(kind, len(base) / 60)
+    n = int(minutes * 60) + 1
+    return np.resize(base, n) if n > len(base) else base[:n]
+
+
+def energy_per_km(v_mps: np.ndarray, temperature_c, vehicle: VehicleParams = COMPACT
+                  ) -> np.ndarray:
+    """kWh/km of one trace at each temperature (vectorised over temperatures)."""
+    t = np.atleast_1d(np.asarray(temperature_c, dtype=float))
+    traces = np.broadcast_to(v_mps, (len(t), len(v_mps)))
+    e = trace_energy_kwh(traces, 1.0, vehicle=vehicle, profile=LOGGED_PROFILE,
+                         temperature_c=t)
+    km = float(np.sum(0.5 * (v_mps[1:] + v_mps[:-1]))) / 1000.0
+    return e / km
+
+
+def _no_hvac(v: VehicleParams) -> VehicleParams:
+    return dataclasses.replace(v, heating_use=0.0, cooling_use=0.0,
+                               cabin_heat_capacity_kj_per_k=0.0)
+
+
+def curve_table(vehicle: VehicleParams = COMPACT) -> list[dict]:
+    """Model against each published point: ratio, error, matched."""
+    rows = []
+    for src, kind, t, t_ref, ratio, how in PUBLISHED:
+        veh = _no_hvac(vehicle) if kind.endswith("no_hvac") else vehicle
+        e = energy_per_km(cycle(kind), [t, t_ref], veh)
+        model = float(e[0] / e[1])
+        rows.append({"source": src, "cycle": kind, "temperature_c": t, "reference_c": t_ref,
+                     "published_ratio": ratio, "model_ratio": model,
+                     "rel_error": model / ratio - 1.0,
+                     "matched": bool(abs(model / ratio - 1.0) <= TOLERANCE), "derived": how})
+    return rows
+
+
+def curves(vehicle: VehicleParams = COMPACT, temps=None) -> dict[str, np.ndarray]:
+    """Consumption ratio to 21.5 degC over a temperature grid, per cycle."""
+    temps = np.linspace(-25.0, 40.0, 66) if temps is None else np.asarray(temps, float)
+    out = {"temperature_c": temps}
+    for kind in ("city", "highway", "combined"):
+        e = energy_per_km(cycle(kind), np.r_[temps, 21.5], vehicle)
+        out[kind] = e[:-1] / e[-1]
+    hp = dataclasses.replace(vehicle, heater_kind="heat_pump")
+    e = energy_per_km(cycle("combined"), np.r_[temps, 21.5], hp)
+    out["combined_heat_pump"] = e[:-1] / e[-1]
+    return out
+
+
+def sensitivity(vehicle: VehicleParams = COMPACT) -> dict:
+    """kWh/km against temperature for three trip lengths, and against cruise speed."""
+    temps = np.linspace(-20.0, 40.0, 61)
+    by_len = {m: energy_per_km(cycle("city", m), temps, vehicle) for m in (5, 15, 45)}
+    speeds = np.arange(20.0, 131.0, 10.0)
+    by_speed = {}
+    for t in (-10.0, 20.0, 35.0):
+        by_speed[t] = np.array([energy_per_km(_phase(s, max(s / 10, 2), 900, max(s / 10, 2), 0),
+                                              t, vehicle)[0] for s in speeds])
+    return {"temperature_c": temps, "by_length": by_len, "speed_kmh": speeds,
+            "by_speed": by_speed}

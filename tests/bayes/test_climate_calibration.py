@@ -1,0 +1,104 @@
+"""Calibration of the climate parameters and the day/session random effect."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from hybridev import VehicleParams, make_trips
+from hybridev.bayes.priors import CLIMATE_PARAMS, PhysicsPrior
+from hybridev.bayes.sampler import _group_codes, calibrate_physics, simulate_measured
+
+# an illustrative compact car, not any data set's
+CAR = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+
+
+def _trips(n, seed):
+    t = make_trips(n, seed=seed)
+    rng = np.random.default_rng(seed)
+    t["temperature_c"] = rng.uniform(-15.0, 35.0, n)  # winter and summer
+    return t
+
+
+def _calibrate(m, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibrate_physics(m, CAR, n_steps=1500, **kw)
+
+
+def test_posterior_recovers_planted_climate_parameters():
+    """The truth uses 40 % of the modelled heating and 1.5x the warm-up energy; the
+    posterior's 99 % intervals contain both, and its medians are closer to the truth
+    than the nominal 1 (tolerance: 99 % credible interval; 3 % noise, 300 trips)."""
+    truth = {"heating_scale": 0.4, "warmup_scale": 1.5}
+    m = simulate_measured(_trips(300, 1), CAR, true_params=truth, noise_rel=0.03, seed=2)
+    post = _calibrate(m, params=("aux_base_kw",), groups=None)
+    assert set(CLIMATE_PARAMS) <= set(post.param_names)  # added for a continuous car
+    s = post.summary(level=0.99)
+    for name, x in truth.items():
+        assert s.loc[name, "q05"] <= x <= s.loc[name, "q95"], name
+        assert abs(s.loc[name, "median"] - x) < abs(1.0 - x)
+    assert post.prior_check()["inside"].all()
+
+
+def test_groups_widen_the_posterior():
+    """Trips of a day share a 6 % error: with groups the posterior of the drivetrain
+    efficiency (which scales every trip, like a day effect) is wider, and the day
+    effect's sd is found (within 0.03-0.12)."""
+    t = _trips(240, 3).sort_values("distance_km").reset_index(drop=True)
+    m = simulate_measured(t, VehicleParams(), noise_rel=0.02, seed=4)
+    day = np.arange(len(m)) % 12
+    m["date"] = [f"2026-01-{d + 1:02d}" for d in day]
+    m["energy_kwh"] *= 1.0 + np.random.default_rng(5).normal(0.0, 0.06, 12)[day]
+    kw = dict(params=("aux_base_kw", "drivetrain_efficiency"), n_steps=1500, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        indep = calibrate_physics(m, groups=None, **kw)
+        grouped = calibrate_physics(m, **kw)  # "auto": the date column
+    sd_i = indep.summary().loc["drivetrain_efficiency", "sd"]
+    sd_g = grouped.summary().loc["drivetrain_efficiency", "sd"]
+    assert sd_g > 1.5 * sd_i
+    assert 0.03 < grouped.diagnostics["group_sd"] < 0.12
+    assert "group_sd" not in indep.diagnostics
+
+
+def test_group_codes():
+    t = make_trips(5, seed=0)
+    assert _group_codes(t, "auto") is None
+    t["session_group"] = ["a", "a", None, "b", None]
+    codes = _group_codes(t, "auto")
+    assert codes[0] == codes[1] != codes[3] and len(set(codes)) == 4  # missing: own groups
+    with pytest.raises(ValueError, match="groups"):
+        _group_codes(t, "nope")
+    with pytest.raises(ValueError, match="groups"):
+        _group_codes(t, [1, 2])
+
+
+def test_coastdown_priors_are_tight_and_flag_unphysical_medians():
+    pr = PhysicsPrior()
+    loose = pr.spec("drag_area_m2", 0.5, 0.75)
+    tight = pr.spec("drag_area_m2", 0.5, 0.75, coastdown=True)
+    assert tight[2] < loose[2]
+    # a truth 60 % above the coast-down drag area is flagged as outside the prior
+    m = simulate_measured(_trips(200, 6), CAR, noise_rel=0.02, seed=1,
+                          true_params={"drag_area_m2": 1.6 * CAR.drag_area_m2,
+                                       "rolling_resistance_coef": 0.5 * CAR.rolling_resistance_coef})
+    post = _calibrate(m, params=("drag_area_m2", "rolling_resistance_coef"), groups=None,
+                      climate_params=False)
+    chk = post.prior_check()
+    assert not chk["inside"].all()
+    corr = post.correlations()
+    assert corr.shape == (2, 2) and np.allclose(np.diag(corr), 1.0)
+
+
+def test_groups_need_unmarginalised_trips():
+    """Unlabelled synthetic trips are a mixture over modes: "auto" groups fall back to
+    independent trips, explicit groups are refused."""
+    m = simulate_measured(make_trips(40, seed=0), noise_rel=0.03, seed=1, hide_mode=True)
+    m["date"] = [f"d{i % 4}" for i in range(40)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        post = calibrate_physics(m, params=("aux_base_kw",), n_steps=300)
+    assert "group_sd" not in post.diagnostics
+    with pytest.raises(ValueError, match="groups"):
+        calibrate_physics(m, params=("aux_base_kw",), n_steps=300, groups="date")

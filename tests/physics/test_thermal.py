@@ -1,0 +1,145 @@
+"""Continuous climate model (hybridev.physics.thermal) and its use in the physics."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hybridev import VehicleParams, make_trips, simulate, trace_energy_kwh
+from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.stats import energy_from_stats
+from hybridev.physics.stats_build import trip_stats
+from hybridev.physics.thermal import (
+    climate_split_kw,
+    cold_factors,
+    heat_pump_cop,
+    heating_balance_c,
+    steady_climate_kw,
+    warmup_energy_kwh,
+)
+
+CONT = VehicleParams(climate_model="continuous")
+temps = st.floats(-40.0, 50.0, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(temps, temps)
+def test_power_grows_with_distance_from_the_comfort_band(t1, t2):
+    """Monotone in |T - T_set| on each side: colder below the heating balance
+    point, hotter above the set point, never less power."""
+    lo, hi = sorted((t1, t2))
+    p_lo, p_hi = steady_climate_kw([lo, hi], CONT)
+    tb = heating_balance_c(CONT)
+    if hi <= tb:
+        assert p_lo >= p_hi - 1e-12
+    if lo >= CONT.t_set_c:
+        assert p_hi >= p_lo - 1e-12
+    if tb <= lo <= hi <= CONT.t_set_c:
+        assert p_lo == p_hi == 0.0
+
+
+@settings(max_examples=100, deadline=None)
+@given(temps, st.floats(0.5, 10.0), st.floats(20.0, 400.0))
+def test_heating_capped_at_heater_rating(t, heater_kw, ua):
+    v = dataclasses.replace(CONT, heater_max_kw=heater_kw, cabin_ua_w_per_k=ua)
+    heat, cool = climate_split_kw(t, v)
+    assert 0.0 <= heat <= heater_kw + 1e-12
+    assert 0.0 <= cool <= v.ac_max_kw + 1e-12
+    # the heater's spare power bounds the warm-up: never above the rating over the trip
+    assert heat * 0.1 + warmup_energy_kwh(t, 360.0, v) <= heater_kw * 0.1 + v.ac_max_kw * 0.1
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(-40.0, 30.0))
+def test_heat_pump_never_draws_more_than_ptc(t):
+    hp = dataclasses.replace(CONT, heater_kind="heat_pump")
+    assert steady_climate_kw(t, hp) <= steady_climate_kw(t, CONT) + 1e-12
+
+    def total(v):  # a 30-min trip; the warm-up alone is not monotone (heater cap)
+        return 0.5 * steady_climate_kw(t, v) + warmup_energy_kwh(t, 1800.0, v)
+
+    assert total(hp) <= total(CONT) + 1e-12
+    if -20.0 < t < heating_balance_c(CONT) - 1.0:  # COP > 1 there: strictly less
+        assert steady_climate_kw(t, hp) < steady_climate_kw(t, CONT)
+
+
+def test_heat_pump_cop_range():
+    cop = heat_pump_cop(np.linspace(-40, 40, 81))
+    assert cop.min() == 1.0 and cop.max() == 3.0 and np.all(np.diff(cop) >= 0)
+
+
+def test_warmup_dominates_short_winter_trips():
+    """A 5-minute trip at 0 degC spends more on the warm-up than on steady heating,
+    a 2-hour trip the other way round; at -10 degC a 5-minute trip runs the heater
+    flat out."""
+    for dur_s, warm_wins in ((300.0, True), (7200.0, False)):
+        warm = warmup_energy_kwh(0.0, dur_s, CONT)
+        steady = steady_climate_kw(0.0, CONT) * dur_s / 3600.0
+        assert bool(warm > steady) is warm_wins
+    flat_out = steady_climate_kw(-10.0, CONT) / 12 + warmup_energy_kwh(-10.0, 300.0, CONT)
+    assert flat_out == pytest.approx(CONT.heater_max_kw / 12)
+    # per km, a short winter trip costs far more than a long one
+    short = trace_energy_kwh([10.0] * 301, 1.0, vehicle=CONT, temperature_c=-10.0) / 3.0
+    long_ = trace_energy_kwh([10.0] * 3601, 1.0, vehicle=CONT, temperature_c=-10.0) / 36.0
+    assert short > 1.2 * long_
+
+
+@pytest.mark.parametrize("temp", [-15.0, 0.0, 30.0, 40.0])
+def test_climate_energy_follows_duration_not_distance(temp):
+    """Same duration, three times the distance: the same climate energy; twice
+    the duration at the same distance: twice the steady climate energy."""
+    v = dataclasses.replace(CONT, cold_traction_loss_per_k=0.0, cold_regen_loss_per_k=0.0)
+    off = dataclasses.replace(v, cabin_ua_w_per_k=0.0, solar_gain_w=0.0, cabin_gain_w=0.0,
+                              cabin_heat_capacity_kj_per_k=0.0)
+
+    def climate(speed, n):
+        return float(trace_energy_kwh([speed] * (n + 1), 1.0, vehicle=v, temperature_c=temp)
+                     - trace_energy_kwh([speed] * (n + 1), 1.0, vehicle=off, temperature_c=temp))
+
+    slow, fast = climate(5.0, 1800), climate(15.0, 1800)
+    assert slow == pytest.approx(fast, rel=1e-9) and slow > 0
+    steady = steady_climate_kw(temp, v) * 0.5
+    assert climate(5.0, 3600) - climate(10.0, 1800) == pytest.approx(steady, rel=1e-9)
+
+
+def test_cold_factors():
+    trac, regen = cold_factors([-30.0, -7.0, 20.0, 35.0], CONT)
+    assert np.all(np.diff(trac) <= 0) and np.all(np.diff(regen) >= 0)
+    assert trac[-1] == regen[-1] == 1.0 and regen.min() >= 0.2
+    one = cold_factors([-30.0, 35.0], VehicleParams())  # paper preset: none
+    assert np.all(one[0] == 1.0) and np.all(one[1] == 1.0)
+
+
+def test_paper_preset_reproduces_the_bands():
+    """The default vehicle is the paper's: four bands, no warm-up, no cold terms."""
+    v = VehicleParams.paper()
+    assert v == VehicleParams() and v.climate_model == "paper_bands"
+    assert hvac_power_kw([-5.0, 10.0, 20.0, 25.0, 32.0], v).tolist() == [2.0, 1.0, 0.5, 0.5, 2.5]
+    trips = make_trips(30, seed=4)
+    s = trip_stats(trips, v)
+    assert np.all(s.warmup_kwh == 0) and np.all(s.cooling_kw == 0)
+    # the continuous fields do not matter for the paper preset
+    other = dataclasses.replace(v, cabin_ua_w_per_k=500.0, cold_traction_loss_per_k=0.04)
+    assert np.array_equal(simulate(trips, other).energy_kwh_physics,
+                          simulate(trips, v).energy_kwh_physics)
+
+
+def test_from_coastdown_uses_the_continuous_model_and_stats_stay_exact():
+    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+    assert v.climate_model == "continuous" and v.road_load_source == "coastdown"
+    trips = make_trips(60, seed=2)
+    trips["temperature_c"] = np.linspace(-20.0, 40.0, len(trips))
+    s = trip_stats(trips, v)
+    assert s.warmup_kwh.max() > 0 and s.cooling_kw.max() > 0
+    ref = simulate(trips, v).energy_kwh_physics.to_numpy()
+    assert np.allclose(energy_from_stats(s), ref, rtol=1e-9)
+
+
+@pytest.mark.parametrize("field,value", [("climate_model", "bands"), ("heater_kind", "gas"),
+                                         ("cabin_ua_w_per_k", -1.0), ("t_set_c", 60.0),
+                                         ("ac_cop", 0.1), ("cold_regen_loss_per_k", 1.0)])
+def test_invalid_climate_fields_name_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        VehicleParams(**{field: value})
