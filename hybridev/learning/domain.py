@@ -65,10 +65,10 @@ DOMAIN_TOLERANCES = (3.0, 8.0, float(np.log(1.5)), float(np.log(1.5)), 1.0)
 MISSING_INPUT_SCORE = 2.0
 """Domain score of a trip lacking an input the model was trained with."""
 
-OOD_INFLATION_PER_UNIT = 0.5
-"""Out-of-domain spread multiplier ``1 + 0.5 (score - 1)``, capped at 4 (score 7)."""
+OOD_INFLATION_PER_UNIT = 0.25
+"""Out-of-domain spread multiplier ``1 + 0.25 (score - 1)``, capped at 3 (score 9)."""
 
-_MAX_INFLATION = 4.0
+_MAX_INFLATION = 3.0
 
 
 def domain_quantities(table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
@@ -137,7 +137,7 @@ class TrainingDomain:
     >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
     >>> score, ok = dom.score(new)
     >>> score.round(2).tolist(), ok.tolist()
-    [[0.33, 2.67, 4.33], [True, False, False]]
+    ([0.33, 2.67, 4.33], [True, False, False])
     """
 
     values: tuple
@@ -197,7 +197,7 @@ class TrainingDomain:
 
     @staticmethod
     def inflation(score) -> np.ndarray:
-        """Spread multiplier of out-of-domain trips: ``1 + 0.5 (score - 1)``, in [1, 4]."""
+        """Spread multiplier of out-of-domain trips: ``1 + 0.25 (score - 1)``, in [1, 3]."""
         s = np.asarray(score, float)
         return np.clip(1.0 + OOD_INFLATION_PER_UNIT * (s - 1.0), 1.0, _MAX_INFLATION)
 

@@ -58,7 +58,7 @@ def test_columns_and_ordered_bands(model, conditions):
     c, s0 = conditions
     out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
     assert list(out.columns) == [*c.columns, "soc_initial", "soc_reserve", "budget_kwh",
-                                 "range_km_physics", *BANDS]
+                                 "range_km_physics", *BANDS, "in_domain", "domain_score"]
     np.testing.assert_allclose(out.budget_kwh, (s0 - 0.1) * 75.0)
     r = out[BANDS].to_numpy()
     assert np.isfinite(r).all() and (r > 0).all()
