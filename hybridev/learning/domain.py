@@ -15,7 +15,8 @@ quantity                  from                          tolerance ``tol_f``
 ========================  ===========================  =====================
 
 A new trip's gap in each quantity is the distance to the *nearest* training
-value, in units of the tolerance; its ``domain_score`` is the largest gap over
+value, in units of the tolerance (beyond the training range, in units of a
+third of it, :data:`EDGE_FRACTION`: extrapolation is riskier); its ``domain_score`` is the largest gap over
 the quantities, so both a value outside the training range and one inside a
 wide gap of it count (the paper's synthetic design has only -5, 20 and 32 degC:
 a trip at 3 degC is 8 degC from any training trip, score 2.7). A trip is
@@ -48,6 +49,7 @@ from hybridev.core.errors import OutOfDomainWarning
 __all__ = [
     "DOMAIN_QUANTITIES",
     "DOMAIN_TOLERANCES",
+    "EDGE_FRACTION",
     "MISSING_INPUT_SCORE",
     "OOD_INFLATION_PER_UNIT",
     "TrainingDomain",
@@ -61,6 +63,10 @@ DOMAIN_QUANTITIES = ("temperature_c", "avg_speed_kmh", "log_distance", "log_dura
 
 DOMAIN_TOLERANCES = (3.0, 8.0, float(np.log(1.5)), float(np.log(1.5)), 1.0)
 """Gap (in the quantity's unit) that makes a trip leave the domain, per quantity."""
+
+EDGE_FRACTION = 1.0 / 3.0
+"""Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 degC, ...):
+extrapolating is riskier than interpolating between training values."""
 
 MISSING_INPUT_SCORE = 2.0
 """Domain score of a trip lacking an input the model was trained with."""
@@ -137,7 +143,7 @@ class TrainingDomain:
     >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
     >>> score, ok = dom.score(new)
     >>> score.round(2).tolist(), ok.tolist()
-    ([0.33, 2.67, 4.33], [True, False, False])
+    ([0.33, 2.67, 13.0], [True, False, False])
     """
 
     values: tuple
@@ -165,8 +171,9 @@ class TrainingDomain:
             i = np.searchsorted(vals, q[:, j])
             below = vals[np.clip(i - 1, 0, len(vals) - 1)]
             above = vals[np.clip(i, 0, len(vals) - 1)]
-            near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above))
-            out[:, j] = near / tol
+            near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
+            outside = np.maximum(vals[0] - q[:, j], q[:, j] - vals[-1])  # > 0 beyond the range
+            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
         return out
 
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:

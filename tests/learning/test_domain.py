@@ -25,6 +25,7 @@ def test_gap_inside_the_range_leaves_the_domain():
     score, ok = dom.score(_table([-5, -3, 3, 14, 21.5, 32, 40]))
     assert ok.tolist() == [True, True, False, False, True, True, False]
     assert score[2] == pytest.approx(8 / 3)
+    assert score[-1] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 degC
     # the score rises as the trip leaves the domain
     s, _ = dom.score(_table([32, 36, 45, 60]))
     assert np.all(np.diff(s) > 0)
@@ -32,7 +33,7 @@ def test_gap_inside_the_range_leaves_the_domain():
 
 def test_distance_speed_and_duration_ranges():
     dom = TrainingDomain.fit(_table([20] * 3, dist=10.0), np.zeros((3, 1)))
-    s, ok = dom.score(pd.concat([_table([20], dist=14.0), _table([20], dist=30.0),
+    _s, ok = dom.score(pd.concat([_table([20], dist=14.0), _table([20], dist=30.0),
                                  _table([20], speed=60.0)], ignore_index=True))
     assert ok.tolist() == [True, False, False]
 
