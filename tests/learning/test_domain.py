@@ -33,7 +33,7 @@ def test_gap_inside_the_range_leaves_the_domain():
 
 def test_distance_speed_and_duration_ranges():
     dom = TrainingDomain.fit(_table([20] * 3, dist=10.0), np.zeros((3, 1)))
-    _s, ok = dom.score(pd.concat([_table([20], dist=14.0), _table([20], dist=30.0),
+    _s, ok = dom.score(pd.concat([_table([20], dist=11.0), _table([20], dist=30.0),
                                  _table([20], speed=60.0)], ignore_index=True))
     assert ok.tolist() == [True, False, False]
 
