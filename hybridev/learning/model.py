@@ -62,6 +62,7 @@ from hybridev.learning.features import (
     trip_features,
 )
 from hybridev.learning.inputs import _check_range, unpack_trips, validate_prediction_trips
+from hybridev.learning.mondrian import mondrian_bins
 from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
 from hybridev.learning.predictive import soc_from_energy
@@ -160,6 +161,10 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal from there on.
     cv_folds : int
         Folds of the CV+ step (default 5; fewer when there are fewer groups).
+    mondrian : bool
+        Calibrate per bin of temperature band and trip length where a bin has
+        enough calibration trips for the level (:mod:`hybridev.learning.mondrian`);
+        default False (one pooled calibration).
     missing_mode : str or DrivingProfile
         Physics of trips without ``mode`` in the calibration: ``"infer"``
         (mixture over the profiles with sampled weights), ``"marginalize"``
@@ -229,7 +234,7 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
                  missing_mode: str | DrivingProfile = "infer",
                  residual_target: str = "relative",
                  physics_params: tuple[str, ...] = DEFAULT_PARAMS,
-                 conformal: str = "auto", cv_folds: int = 5) -> None:
+                 conformal: str = "auto", cv_folds: int = 5, mondrian: bool = False) -> None:
         self.vehicle = vehicle
         self.features = features
         self.n_members = n_members
@@ -254,6 +259,7 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         self.physics_params = physics_params
         self.conformal = conformal
         self.cv_folds = cv_folds
+        self.mondrian = mondrian
 
     # -- configuration -------------------------------------------------------------------
     def _vehicle(self) -> VehicleParams:
@@ -305,6 +311,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         if self.conformal not in CONFORMAL_MODES:
             raise ValueError(f"{o}.conformal={self.conformal!r}; allowed: {list(CONFORMAL_MODES)}")
         _check_range(f"{o}.cv_folds", self.cv_folds, 2, 100, integer=True)
+        if not isinstance(self.mondrian, bool | np.bool_):
+            raise ValueError(f"{o}.mondrian={self.mondrian!r} must be a bool")
         bad = [p for p in self.physics_params if p not in STAT_PARAMS]
         if bad or len(self.physics_params) == 0:
             raise ValueError(f"{o}.physics_params={self.physics_params!r}; allowed: a non-empty "
@@ -520,6 +528,9 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         elif mode == "cv+":
             fit_cv_plus(self, good, traces, codes, xs, ys, e_meas, seed, cv_ss)
         warn_calibration(self, codes, cal_idx)
+        self.mondrian_cut_km_ = float(np.median(good["distance_km"]))
+        self.conformal_bins_ = mondrian_bins(good.iloc[cal_idx] if n_cal else good,
+                                             self.mondrian_cut_km_)
         info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
                 "n_groups": len(np.unique(codes)), "conformal": mode,
                 "cv_folds": len(self.cv_nets_), "seed": int(seed),

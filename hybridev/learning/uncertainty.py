@@ -61,22 +61,15 @@ from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
 from hybridev.learning.cvplus import nets_from_arrays, nets_to_arrays
-from hybridev.learning.domain import (
-    MISSING_INPUT_SCORE,
-    TrainingDomain,
-    domain_quantities,
-    warn_out_of_domain,
-)
-from hybridev.learning.features import MODE_NAMES
+from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.inputs import unpack_trips
+from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
+from hybridev.learning.ood import OutOfDomainMixin
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.trips import with_physics_columns
 
 __all__ = ["KEEP_POSTERIOR_DRAWS", "ProbabilisticMixin"]
-
-_PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
-                    "kwh_per_km_physics")
 
 KEEP_POSTERIOR_DRAWS = 500
 """Posterior draws a fitted model keeps (evenly spaced over the thinned chain)."""
@@ -90,7 +83,7 @@ def _check_level(level) -> None:
                          "(a confidence level, e.g. 0.9)")
 
 
-class ProbabilisticMixin:
+class ProbabilisticMixin(OutOfDomainMixin):
     """Physics posterior, predictive distributions and conformal intervals for HybridModel."""
 
     # -- physics -----------------------------------------------------------------------
@@ -211,61 +204,6 @@ class ProbabilisticMixin:
         cp = getattr(self, "conformal_", None)
         nets = getattr(self, "cv_nets_", None) or []
         return nets if isinstance(cp, CVPlusConformal) and len(nets) == cp.n_folds else []
-
-    def _ood_spread(self, table: pd.DataFrame, dist: EnergyDistribution, traces
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(domain_score, in_domain, sd_ood)`` per trip; warns once when some are out.
-
-        ``sd_ood`` (kWh) of a trip outside the training ranges or in a gap of
-        them is the physics posterior predictive spread (posterior draws and
-        its relative noise) together with the model's own spread and the
-        residual's departure from the physics, times the inflation
-        :meth:`~hybridev.learning.domain.TrainingDomain.inflation` of its
-        largest gap. A trip only lacking the ``mode`` the model was trained
-        with is marginalised over the three modes instead: its spread adds
-        the spread between the three modes' predictions (no inflation). A trip
-        lacking a trained-with logged trace counts as a gap of 2.
-        """
-        score, ok, sd_ood = self._ood_sd(table, dist.mean(), dist.std(),
-                                         dist.physics_draws_kwh.var(axis=0), traces)
-        warn_out_of_domain(int((~ok).sum()), dist.n_trips, stacklevel=4)
-        return score, ok, sd_ood
-
-    def _ood_sd(self, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray,
-                var_draws: np.ndarray, traces=None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`_ood_spread` from the pieces: means, spreads and physics-draw variances."""
-        dom = getattr(self, "domain_", None)
-        n = len(table)
-        if dom is None:
-            return np.zeros(n), np.ones(n, dtype=bool), sd
-        score, ok = dom.score(table, traces)
-        if ok.all():
-            return score, ok, sd
-        gap = dom.gaps(table, traces).max(axis=1)
-        no_trace = dom.needs_trace & ~domain_quantities(table, traces)[1]
-        gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
-        post = getattr(self, "posterior_", None)
-        noise = float(np.median(post.noise_rel)) if post is not None else 0.0
-        e_p = table["energy_kwh_physics"].to_numpy(float)
-        var_pp = var_draws + (noise * e_p) ** 2 + (mu - e_p) ** 2 + sd**2
-        sd_ood = np.where(gap > 1.0, np.sqrt(var_pp) * TrainingDomain.inflation(gap), sd)
-        no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
-                   else np.zeros(n, dtype=bool))
-        if no_mode.any():
-            sub = table.loc[no_mode, [c for c in table.columns if c not in _PHYSICS_COLUMNS]]
-            mus = np.stack([self._mode_prediction(sub.assign(mode=m), traces)
-                            for m in MODE_NAMES])
-            between = mus.var(axis=0) + (mu[no_mode] - mus.mean(axis=0)) ** 2
-            sd_ood[no_mode] = np.sqrt(sd_ood[no_mode] ** 2 + between)
-        return score, ok, sd_ood
-
-    def _mode_prediction(self, trips: pd.DataFrame, traces) -> np.ndarray:
-        """Point energy (kWh) of ``trips`` with their given modes, shape (n_trips,)."""
-        tab = self._physics(trips, traces)
-        e = tab["energy_kwh_physics"].to_numpy(float)
-        sc = self._target_scale(e, tab["distance_km"].to_numpy(float))
-        return self._combine(e, self._residual_moments(self._features(tab), sc)[0].mean(0))
 
     def predict_distribution(self, trips: pd.DataFrame, *, level: float = 0.9,
                              seed: int = 0, timeseries=None) -> EnergyDistribution:
@@ -392,6 +330,12 @@ class ProbabilisticMixin:
         else:
             lo, hi = dist.interval(level)
             lo_one = dist.quantile(1.0 - level)
+        if self.mondrian and q is not None:  # per-bin calibration where the data allow
+            mlo, mhi, used = mondrian_interval(
+                self.conformal_, self.conformal_bins_,
+                mondrian_bins(table, self.mondrian_cut_km_), level, mean=mu, std=sd,
+                fold_means=fm if cv else None, fold_stds=fs if cv else None)
+            lo, hi = np.where(used, mlo, lo), np.where(used, mhi, hi)
         point = np.maximum(mu, floor)
         lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
         score, ok, sd_ood = self._ood_spread(table, dist, traces)
@@ -441,6 +385,9 @@ class ProbabilisticMixin:
         cp = getattr(self, "conformal_", None)
         if cp is not None:
             arrays["conformal_residuals"] = cp.residuals
+        if cp is not None and getattr(self, "conformal_bins_", None) is not None:
+            doc["mondrian_cut_km"] = self.mondrian_cut_km_
+            arrays["conformal_bins"] = np.asarray(self.conformal_bins_, np.int64)
         if self._cv_nets():
             doc["cv_folds"] = len(self.cv_nets_)
             arrays["conformal_fold"] = cp.fold
@@ -460,6 +407,9 @@ class ProbabilisticMixin:
                 "mode_weights": arrays.get("posterior_mode_weights")})
         if "conformal_residuals" in arrays:
             self.conformal_ = NormalizedConformal(arrays["conformal_residuals"])
+        if "mondrian_cut_km" in doc:
+            self.mondrian_cut_km_ = float(doc["mondrian_cut_km"])
+            self.conformal_bins_ = np.asarray(arrays["conformal_bins"], np.int64)
         if "cv_folds" in doc:
             self.conformal_ = CVPlusConformal(arrays["conformal_residuals"],
                                               arrays["conformal_fold"])
