@@ -51,8 +51,8 @@ def test_groups_stay_together_in_folds_and_warn_when_too_few(data):
         HybridModel(**FAST, conformal="split").fit(d.head(30), seed=0)
 
 
-def test_save_load_keeps_cv_plus_and_domain(data, tmp_path):
-    m = HybridModel(**FAST).fit(data.head(30), seed=0)
+def test_save_load_keeps_cv_plus_mondrian_and_domain(data, tmp_path):
+    m = HybridModel(**FAST, mondrian=True).fit(data.head(60), seed=0)
     m.save(tmp_path / "m")
     back = HybridModel.load(tmp_path / "m")
     assert len(back.cv_nets_) == len(m.cv_nets_) == 5
