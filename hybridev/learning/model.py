@@ -17,7 +17,12 @@ Conventions beyond the paper (documented deviations):
   predict net regeneration, and then the prediction is not pushed below it.
 * A validation share of ``val_fraction`` (default ``0.15 / 0.85``, the
   paper's 225 of 1,275 non-test trips) is split off the measured trips, at
-  random with the fit seed, for early stopping.
+  random with the fit seed, for early stopping; with ``groups=`` whole groups
+  (:mod:`hybridev.learning.splits`), as for the conformal calibration.
+* Conformal step: CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal
+  above (:mod:`hybridev.learning.cvplus`, :mod:`hybridev.learning.conformal`);
+  the training domain is recorded (:mod:`hybridev.learning.domain`) and the
+  network inputs are clipped to their training range.
 * An unfitted model, or one saved before fitting, predicts the physics
   energy and warns (:class:`PhysicsFallbackWarning`), as the paper's
   "defaults to the validated physics model".
