@@ -20,8 +20,8 @@ Studies (all with ``HybridModel`` defaults unless a conformal mode is named):
    against size-only baselines (distance, predicted energy).
 3. **M1** (one real car, ``--data``, 104 trips with 1 Hz traces; skipped when
    absent): 5-fold cross-validation grouped by ``date`` (whole days held out),
-   training on 10, 20, 40 trips (whole days drawn at random from the training
-   days) and on all training days; the car as a new user sets it up,
+   training on 10, 20, 40 trips (days drawn at random from the training days,
+   at most half the trips from one day) and on all training days; the car as a new user sets it up,
    ``VehicleParams.from_coastdown(179.4, 0.28, 0.0235, mass_kg=1919)`` and
    ``fit(..., groups=date)``. Then warm-trained (trips at >= 20 degC of the
    training days), tested on every trip of the held-out days.
@@ -199,8 +199,10 @@ def m1_study(root: Path, quick: bool) -> dict:
         y = test.trips["energy_kwh"].to_numpy(float)
         rng = np.random.default_rng(k)
         days = rng.permutation(np.unique(date[tr]))
-        order = np.concatenate([tr[date[tr] == d] for d in days])
         for size in sizes:
+            # whole days in random order, at most half the trips from one day
+            cap = len(tr) if size is None else max(size // 2, 1)
+            order = np.concatenate([tr[date[tr] == d][:cap] for d in days])
             pick = order if size is None else order[:size]
             train = _subset(m, np.isin(np.arange(n), pick))
             for mode in ("auto", "split", "mondrian") if size in (40, None) else ("auto",):
@@ -210,8 +212,10 @@ def m1_study(root: Path, quick: bool) -> dict:
                 row = {"fold": k, "n_train": len(pick), "size": size or "all", "mode": mode}
                 if out is not None:
                     row |= interval_metrics(y, out)
-                    row["in_coverage"] = interval_metrics(
-                        y[out["in_domain"].to_numpy(bool)], out[out["in_domain"]]).get("coverage")
+                    ok = out["in_domain"].to_numpy(bool)
+                    inside = interval_metrics(y[ok], out[ok])
+                    row |= {"in_coverage": inside.get("coverage"),
+                            "in_rel_width": inside.get("rel_width"), "share_in": float(ok.mean())}
                     if size is None and mode == "auto":
                         pooled.append(pd.DataFrame({"y": y}).join(out[[
                             "energy_kwh_pred", "confidence", "confidence_rel", "distance_km"]]))
@@ -237,8 +241,8 @@ def _fmt(v, f="{:.3f}"):
 
 def size_table(rows: list[dict], keys: tuple[str, ...]) -> str:
     df = pd.DataFrame(rows)
-    cols = [c for c in ("coverage", "rel_width", "winkler_rel", "mape", "in_coverage")
-            if c in df.columns]
+    cols = [c for c in ("coverage", "rel_width", "winkler_rel", "mape", "in_coverage",
+                        "in_rel_width", "share_in") if c in df.columns]
     g = df.groupby(list(keys), sort=False)[cols].agg(["mean", "min", "max"])
     lines = ["| " + " | ".join(keys) + " | " + " | ".join(
         f"{c} mean (min-max)" for c in cols) + " |",

@@ -51,7 +51,7 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.priors import DEFAULT_PARAMS
-from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.timeseries import as_traces
@@ -483,6 +483,11 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
         n = len(good)
         codes = group_codes(groups, measured_trips, n)
+        if groups is not None and len(np.unique(codes)) < 2 and n > 1:
+            warnings.warn(f"groups: all {n} trips are in one group, so no split can keep groups "
+                          "apart; every trip is its own group instead (coverage on new groups "
+                          "is not assessed)", CalibrationWarning, stacklevel=2)
+            codes = np.arange(n)
         split_ss, torch_ss, cv_ss = np.random.SeedSequence(int(seed)).spawn(3)
         rng = np.random.default_rng(split_ss)
         mode = self._conformal_mode(n)
