@@ -3,8 +3,9 @@
 The user's design, beyond the paper: an emcee posterior over the physics
 parameters (:func:`hybridev.bayes.sampler.calibrate_physics`) combined with a deep
 ensemble of residual networks with mean and variance heads
-(:mod:`hybridev.learning.nn`), made to cover by a split-conformal step
-(:mod:`hybridev.learning.conformal`).
+(:mod:`hybridev.learning.nn`), made to cover by a conformal step
+(:mod:`hybridev.learning.conformal`: CV+ on small fleets, split conformal on
+large ones, optionally per bin, :mod:`hybridev.learning.mondrian`).
 
 For a trip with features ``x``, posterior draws ``theta_d`` (d = 1..D) and
 members ``m`` (m = 1..M):
@@ -15,10 +16,14 @@ where ``theta_hat`` is the posterior median (the physics the network was
 trained against). :class:`hybridev.learning.predictive.EnergyDistribution` holds the
 pieces; its mean is the point prediction ``energy_kwh_pred``.
 
-Intervals (:meth:`ProbabilisticMixin.predict_interval`) are normalised split-
-conformal intervals ``mu +- q_level * s`` of energy, with ``mu`` and ``s`` the
-mean and standard deviation of that distribution and ``q_level`` from
-calibration trips held out of every other fitting step. Final SoC
+Intervals (:meth:`ProbabilisticMixin.predict_interval`) are normalised
+conformal intervals of energy: split conformal ``mu +- q_level * s``, with
+``mu`` and ``s`` the mean and standard deviation of that distribution and
+``q_level`` from calibration trips held out of every other fitting step, or
+CV+ (:meth:`~hybridev.learning.conformal.CVPlusConformal.cv_interval`) from the
+fold ensembles' means and spreads and the out-of-fold scores (widened to hold
+``mu``). Trips outside the training domain get the wider out-of-domain
+interval ``mu +- z s_ood`` (:mod:`hybridev.learning.ood`). Final SoC
 ``s0 - E / C`` (clipped to [0, 1]) is monotone in energy, so the SoC interval is the image
 of the energy interval, except for trips that may empty the battery (energy
 upper bound at or above ``s0 C``): their SoC has a point mass at 0, a central
@@ -37,17 +42,19 @@ spread and raises a ``ValueError`` saying how to get one; a ``level`` above
 and raises too.
 
 Trips without a ``mode`` get the posterior-weighted (``missing_mode="infer"``)
-or equal-weight mixture mean of the three profiles' physics; the spread
-between the profiles is not part of the physics draws, so it is carried by
-the members' noise heads (when the training trips were unlabelled too) and by
-the conformal step. Intervals for unlabelled trips from a model fitted and
-calibrated on labelled ones are therefore not covered by the conformal
-guarantee.
+or equal-weight mixture mean of the three profiles' physics. When the model
+was trained on unlabelled trips too, the spread between the profiles is
+carried by the members' noise heads and the conformal step; when every
+training trip had a mode, such trips are out of the domain and the spread
+between the three modes' predictions is added (:mod:`hybridev.learning.ood`).
 
 ``confidence`` is the predictive standard deviation ``s`` of the trip energy
 in kWh (aleatoric noise of the members, their disagreement, and the physics
-posterior spread): higher means less sure. The conformal factor multiplies all
-trips alike, so it does not change the ranking and is not applied.
+posterior spread; ``s_ood`` out of the domain): higher means less sure.
+``confidence_rel`` divides it by the energy scale ``max(|E|, 0.05 kWh/km d)``:
+scale-free, it ranks the relative error rather than the trip size, and rises
+as trips leave the training domain. The conformal factor multiplies all trips
+alike, so it does not change the ranking and is not applied.
 """
 
 from __future__ import annotations

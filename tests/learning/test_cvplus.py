@@ -82,3 +82,9 @@ def test_bad_conformal_settings():
         HybridModel(conformal="jackknife")._check_params()
     with pytest.raises(ValueError, match="cv_folds=1"):
         HybridModel(cv_folds=1)._check_params()
+
+
+def test_one_group_falls_back_to_trips_with_a_warning(data):
+    with pytest.warns(CalibrationWarning, match="one group"):
+        m = HybridModel(**FAST).fit(data.head(20), seed=0, groups=np.zeros(20))
+    assert m.conformal_.n_folds == 5
