@@ -227,7 +227,7 @@ QUICKSTART = [
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         pred = model.predict_interval(new_trips, level=0.9)
-    print(*sorted({str(w.message) for w in caught}), sep="\n")
+    print(*sorted({str(w.message) for w in caught}), sep="\\n")
     cols = ["energy_kwh_physics", "energy_kwh_pred", "energy_kwh_lo", "energy_kwh_hi",
             "soc_final_pred", "soc_final_lo", "soc_final_hi", "in_domain", "domain_score",
             "confidence", "confidence_rel"]
