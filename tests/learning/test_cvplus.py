@@ -88,3 +88,23 @@ def test_one_group_falls_back_to_trips_with_a_warning(data):
     with pytest.warns(CalibrationWarning, match="one group"):
         m = HybridModel(**FAST).fit(data.head(20), seed=0, groups=np.zeros(20))
     assert m.conformal_.n_folds == 5
+
+
+@pytest.mark.slow
+def test_cv_plus_model_coverage_sweep_on_small_fleets():
+    # The whole hybrid with CV+ on 20 and 40 trips of the structured truth (traces of the
+    # truth independent of the model's: truth seeds >= 50, physics_seed 0): mean coverage
+    # of 90 % intervals over 8 training draws, 500 test trips each. CV+ guarantees about
+    # >= 0.8 (1 - 2 alpha); it is conservative at these sizes. Tolerance: [0.85, 0.99].
+    test = make_dataset(500, truth="structured", seed=49, n_steps=100)
+    y = test["energy_kwh"].to_numpy()
+    for n in (20, 40):
+        cov = []
+        for rep in range(8):
+            train = make_dataset(n, truth="structured", seed=50 + rep, n_steps=100)
+            m = HybridModel(**FAST).fit(train, seed=rep)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", OutOfDomainWarning)
+                out = m.predict_interval(test.drop(columns=["energy_kwh"]), 0.9)
+            cov.append(np.mean((y >= out.energy_kwh_lo) & (y <= out.energy_kwh_hi)))
+        assert 0.85 <= np.mean(cov) <= 0.99, (n, cov)
