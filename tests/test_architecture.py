@@ -122,7 +122,8 @@ def test_lower_layers_never_import_torch(layer):
 
 
 PUBLIC = sorted("""
-FEATURE_NAMES PAPER_CONFIG PROFILES ChargingPlan ConstantRate ConvergenceWarning DrivingProfile
+FEATURE_NAMES PAPER_CONFIG PROFILES CVPlusConformal CalibrationWarning ChargingPlan ConstantRate
+ConvergenceWarning DrivingProfile OutOfDomainWarning
 EnergyDistribution HybridModel LinearBaseline LoggedTraces MeasuredTrips NormalizedConformal
 PhysicsFallbackWarning PhysicsOnly PhysicsPosterior PhysicsPrior PhysicsStats PureML TripTraces
 VehicleParams __version__ aux_power_kw calibrate_physics calibration_report coverage

@@ -122,8 +122,8 @@ def example_schedule(days: int = 7, *, seed: int = 0) -> pd.DataFrame:
                 rows.append((day * 24 + dep + rng.uniform(-0.25, 0.25),
                              dist * rng.uniform(0.9, 1.1), speed, mode, temp))
         elif day % 7 == 5:
-            rows.append((day * 24 + 9.0, 180.0, 95.0, "aggressive", temp))
-            rows.append((day * 24 + 18.0, 180.0, 90.0, "normal", temp))
+            rows.append((day * 24 + 9.0, 140.0, 95.0, "aggressive", temp))
+            rows.append((day * 24 + 18.0, 140.0, 90.0, "normal", temp))
     t = pd.DataFrame(rows, columns=["departure", "distance_km", "avg_speed_kmh", "mode",
                                     "temperature_c"])
     t["hour"] = np.floor(t["departure"] % 24.0)

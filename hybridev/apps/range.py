@@ -83,6 +83,7 @@ import pandas as pd
 
 from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.learning.domain import warn_out_of_domain
 from hybridev.learning.features import normalize_modes
 from hybridev.learning.model import HybridModel
 from hybridev.learning.physical import (
@@ -284,6 +285,8 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
             x[:, :, j] = (val - model.feature_mean_[j]) / model.feature_std_[j]
     factor = (np.ones_like(r) if model.residual_target == "relative" and model._residual
               else r / r_held)  # absolute residual: held per km
+    if getattr(model, "domain_", None) is not None:  # as model._features: no extrapolation
+        x = model.domain_.clip_features(x)
     mean, var = model._residual_moments(
         x.reshape(n * g, -1), model._target_scale(e_med.ravel(), r.ravel()) * factor.ravel())
     std = np.full_like(mean, _MIN_STD_KWH) if var is None else np.sqrt(var)
@@ -295,9 +298,11 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
         draws = np.zeros((1, n * g))
     levels = np.maximum(np.abs(1.0 - 2.0 * probs), 0.5)
     out = np.empty((len(probs), n * g))
+    ood = _ood_ratio(model, base, r, e_med, EnergyDistribution(draws, mean, std))
     for lv in np.unique(levels):
         sel = levels == lv
-        dist = EnergyDistribution(draws, mean, std, spread_factor=_spread_factor(model, lv))
+        f = _spread_factor(model, lv)
+        dist = EnergyDistribution(draws, mean, std, spread_factor=np.maximum(f, ood))
         out[sel] = dist.quantile(probs[sel])
     floor = e_floor.ravel()  # as predict_interval: never below the physical floor
     return np.maximum(out, floor).reshape(len(probs), n, g), e_med
@@ -336,6 +341,23 @@ def _distance_grid(model: HybridModel, base: pd.DataFrame, r0: np.ndarray,
     far = np.maximum(_floor_distance_km(model, base, budget), r[:, -1])
     far = np.where(np.isfinite(far), far * 1.01, r[:, -1] * 2.0)
     return np.concatenate([r, far[:, None]], axis=1)
+
+
+def _ood_ratio(model, base: pd.DataFrame, r: np.ndarray, e_med: np.ndarray,
+               dist: EnergyDistribution) -> np.ndarray:
+    """Per-cell spread multiplier of out-of-domain (trip, distance) cells, (n * G,).
+
+    As :meth:`HybridModel.predict_distribution`: the out-of-domain spread over
+    the raw spread; 0 in the domain (the conformal factor applies there).
+    """
+    n, g = r.shape
+    if getattr(model, "domain_", None) is None:
+        return np.zeros(n * g)
+    rep = base.iloc[np.repeat(np.arange(n), g)].reset_index(drop=True).assign(
+        distance_km=r.ravel(), energy_kwh_physics=e_med.ravel())
+    sd = np.maximum(dist.std(), 1e-12)
+    _, ok, sd_ood = model._ood_sd(rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0))
+    return np.where(ok, 0.0, sd_ood / sd)
 
 
 def _solve(r: np.ndarray, energy: np.ndarray, budget: np.ndarray) -> np.ndarray:
@@ -444,6 +466,11 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     out["range_km_physics"] = _solve(r, e_phys, budget)
     for qi, rq in zip(q, ranges, strict=True):
         out[quantile_column("range_km", qi)] = rq
+    if getattr(model, "domain_", None) is not None:  # conditions at the median range
+        mid = ranges[len(ranges) // 2]
+        score, ok = model.domain_.score(base.assign(distance_km=mid))
+        out["in_domain"], out["domain_score"] = ok, score
+        warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=2)
     return out
 
 

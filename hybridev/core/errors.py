@@ -7,7 +7,7 @@ one small module so that no layer has to import another to raise or catch them.
 
 from __future__ import annotations
 
-__all__ = ["ConvergenceWarning", "PhysicsFallbackWarning"]
+__all__ = ["CalibrationWarning", "ConvergenceWarning", "OutOfDomainWarning", "PhysicsFallbackWarning"]
 
 
 class ConvergenceWarning(UserWarning):
@@ -16,3 +16,11 @@ class ConvergenceWarning(UserWarning):
 
 class PhysicsFallbackWarning(UserWarning):
     """A prediction used the physics model only, because no network was fitted."""
+
+
+class OutOfDomainWarning(UserWarning):
+    """Some trips lie outside the conditions the model was trained on (see ``in_domain``)."""
+
+
+class CalibrationWarning(UserWarning):
+    """The measured trips are too few (or too few groups) to calibrate the usual levels."""

@@ -14,7 +14,7 @@ from hybridev.learning.features import (
 )
 from hybridev.physics.validation import TRIP_RULES, check_table
 
-__all__ = ["validate_prediction_trips"]
+__all__ = ["unpack_trips", "validate_prediction_trips"]
 
 
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
@@ -47,3 +47,22 @@ def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = Fals
         kind = "an integer " if integer else ""
         raise ValueError(f"{name}={value!r} must be {kind}in "
                          f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}")
+
+
+def unpack_trips(trips, timeseries=None):
+    """``(trip_table, traces)`` from a table or a :class:`~hybridev.data.logs.MeasuredTrips`.
+
+    A ``MeasuredTrips`` brings its own traces; an explicit ``timeseries`` wins.
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"distance_km": [10.0]})
+    >>> unpack_trips(t)[1] is None
+    True
+    """
+    from hybridev.data.logs import MeasuredTrips  # data layer: below learning
+    from hybridev.data.timeseries import as_traces
+
+    if isinstance(trips, MeasuredTrips):
+        return trips.trips, (trips.traces if timeseries is None else as_traces(timeseries))
+    return trips, as_traces(timeseries)

@@ -17,7 +17,12 @@ Conventions beyond the paper (documented deviations):
   predict net regeneration, and then the prediction is not pushed below it.
 * A validation share of ``val_fraction`` (default ``0.15 / 0.85``, the
   paper's 225 of 1,275 non-test trips) is split off the measured trips, at
-  random with the fit seed, for early stopping.
+  random with the fit seed, for early stopping; with ``groups=`` whole groups
+  (:mod:`hybridev.learning.splits`), as for the conformal calibration.
+* Conformal step: CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal
+  above (:mod:`hybridev.learning.cvplus`, :mod:`hybridev.learning.conformal`);
+  the training domain is recorded (:mod:`hybridev.learning.domain`) and the
+  network inputs are clipped to their training range.
 * An unfitted model, or one saved before fitting, predicts the physics
   energy and warns (:class:`PhysicsFallbackWarning`), as the paper's
   "defaults to the validated physics model".
@@ -46,11 +51,13 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.priors import DEFAULT_PARAMS
-from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
+from hybridev.learning.domain import TrainingDomain, warn_out_of_domain
 from hybridev.learning.features import (
     FEATURE_NAMES,
     check_feature_names,
@@ -59,12 +66,14 @@ from hybridev.learning.features import (
     physics_modes,
     trip_features,
 )
-from hybridev.learning.inputs import _check_range, validate_prediction_trips
+from hybridev.learning.inputs import _check_range, unpack_trips, validate_prediction_trips
+from hybridev.learning.mondrian import mondrian_bins
 from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
 from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.predictive import soc_from_energy
 from hybridev.learning.refit import RefitGuardMixin
+from hybridev.learning.splits import group_codes, group_holdout
 from hybridev.learning.uncertainty import ProbabilisticMixin
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
@@ -73,6 +82,8 @@ from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import simulate, with_physics_columns
 
 __all__ = [
+    "CONFORMAL_MODES",
+    "CV_PLUS_MAX_TRIPS",
     "PAPER_CONFIG",
     "VAL_FRACTION",
     "HybridModel",
@@ -88,6 +99,14 @@ nominal physics; no posterior, no ensemble, no conformal step.
 
 VAL_FRACTION = 0.15 / 0.85
 """Default validation share: the paper's 225 validation trips of 1,050 + 225."""
+
+CONFORMAL_MODES = ("auto", "cv+", "split")
+"""Values of ``HybridModel(conformal=...)``."""
+
+CV_PLUS_MAX_TRIPS = 250
+"""Below this many measured trips ``conformal="auto"`` uses CV+, from it on split
+conformal (a 15 % split then holds >= 37 calibration trips; CV+ costs ``cv_folds``
+extra ensemble trainings and ``cv_folds`` extra network passes per prediction)."""
 
 _PREDICT_BLOCK_ROWS = 65_536
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
@@ -137,7 +156,22 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     conformal_fraction : float
         Share of the measured trips held out of all fitting for the
         split-conformal calibration of intervals, in [0, 1); 0 leaves the
-        intervals uncalibrated.
+        intervals uncalibrated (in every ``conformal`` mode).
+    conformal : {"auto", "cv+", "split"}
+        Conformal calibration of the intervals (see
+        :mod:`hybridev.learning.conformal`). ``"cv+"``: ``cv_folds`` fold models
+        score every trip out of fold, so every trip serves both fitting and
+        calibration (guarantee: coverage >= about ``1 - 2 alpha``, close to
+        ``1 - alpha`` in practice; 90 % intervals from 9 trips on). ``"split"``:
+        ``conformal_fraction`` of the trips held out (guarantee ``>= 1 - alpha``,
+        needs ``n_cal >= 9`` held-out trips for 90 %). ``"auto"`` (default):
+        CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal from there on.
+    cv_folds : int
+        Folds of the CV+ step (default 5; fewer when there are fewer groups).
+    mondrian : bool
+        Calibrate per bin of temperature band and trip length where a bin has
+        enough calibration trips for the level (:mod:`hybridev.learning.mondrian`);
+        default False (one pooled calibration).
     missing_mode : str or DrivingProfile
         Physics of trips without ``mode`` in the calibration: ``"infer"``
         (mixture over the profiles with sampled weights), ``"marginalize"``
@@ -208,7 +242,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
                  n_posterior_draws: int = 200, conformal_fraction: float = 0.15,
                  missing_mode: str | DrivingProfile = "infer",
                  residual_target: str = "relative",
-                 physics_params: tuple[str, ...] = DEFAULT_PARAMS) -> None:
+                 physics_params: tuple[str, ...] = DEFAULT_PARAMS,
+                 conformal: str = "auto", cv_folds: int = 5, mondrian: bool = False) -> None:
         self.vehicle = vehicle
         self.features = features
         self.n_members = n_members
@@ -231,6 +266,9 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         self.missing_mode = missing_mode
         self.residual_target = residual_target
         self.physics_params = physics_params
+        self.conformal = conformal
+        self.cv_folds = cv_folds
+        self.mondrian = mondrian
 
     # -- configuration -------------------------------------------------------------------
     def _vehicle(self) -> VehicleParams:
@@ -279,6 +317,11 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         if self.residual_target not in ("relative", "absolute"):
             raise ValueError(f"{o}.residual_target={self.residual_target!r}; allowed: "
                              "'relative', 'absolute'")
+        if self.conformal not in CONFORMAL_MODES:
+            raise ValueError(f"{o}.conformal={self.conformal!r}; allowed: {list(CONFORMAL_MODES)}")
+        _check_range(f"{o}.cv_folds", self.cv_folds, 2, 100, integer=True)
+        if not isinstance(self.mondrian, bool | np.bool_):
+            raise ValueError(f"{o}.mondrian={self.mondrian!r} must be a bool")
         bad = [p for p in self.physics_params if p not in STAT_PARAMS]
         if bad or len(self.physics_params) == 0:
             raise ValueError(f"{o}.physics_params={self.physics_params!r}; allowed: a non-empty "
@@ -347,9 +390,12 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     def _features(self, physics_table: pd.DataFrame) -> np.ndarray:
         """Standardised network inputs (n_trips, n_features), float32."""
         x = trip_features(physics_table, self.feature_names_)
-        return ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
+        xs = ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
+        dom = getattr(self, "domain_", None)  # no extrapolation: inputs held in their range
+        return xs if dom is None else dom.clip_features(xs)
 
-    def _residual_moments(self, x: np.ndarray, scale=1.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def _residual_moments(self, x: np.ndarray, scale=1.0, net=None
+                          ) -> tuple[np.ndarray, np.ndarray | None]:
         """Per-member network output in kWh.
 
         Parameters
@@ -365,13 +411,16 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             Each member's residual (``PureML``: energy) prediction.
         var : numpy.ndarray, shape (n_members, n_trips), kWh^2, or None
             Each member's predicted noise variance (``heteroscedastic=True``).
+        net : EnsembleMLP, optional
+            Another ensemble with the same standardisation (a CV+ fold model).
         """
         self._require_fitted()
+        net = self.net_ if net is None else net
         x = np.ascontiguousarray(x, dtype=np.float32)
         means, variances = [], []
         with torch.inference_mode():  # blocks of rows bound the (M, rows, 64) activations
             for start in range(0, max(len(x), 1), _PREDICT_BLOCK_ROWS):
-                m, v = self.net_(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
+                m, v = net(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
                 means.append(m.numpy())
                 variances.append(None if v is None else v.numpy())
         scale = np.asarray(scale, dtype=float)
@@ -389,7 +438,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
 
     # -- public API ---------------------------------------------------------------------
     def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
-            timeseries=None, progress: Callable[[int], None] | None = None) -> HybridModel:
+            timeseries=None, groups=None,
+            progress: Callable[[int], None] | None = None) -> HybridModel:
         """Fit the residual network on measured trips.
 
         Parameters
@@ -403,6 +453,11 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             Logged speed traces by ``trip_id``: the physics of those trips
             (calibration, features, residuals) runs on the real trace. A
             :class:`~hybridev.data.logs.MeasuredTrips` brings its own traces.
+        groups : str or array_like (n_trips,), optional
+            Groups of correlated trips (a column name such as ``"date"`` or
+            ``"session_group"``, or one label per trip): every split (early
+            stopping, split-conformal calibration, CV+ folds) keeps whole
+            groups together (:mod:`hybridev.learning.splits`).
         progress : callable, optional
             Called with the number of finished epochs.
 
@@ -414,6 +469,12 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         ------
         ValueError
             On an invalid parameter or row (naming field, value and range).
+
+        Warns
+        -----
+        CalibrationWarning
+            When the data cannot calibrate 90 % intervals (too few calibration
+            trips or groups).
         """
         self._check_params()
         _check_range("seed", seed, 0, 2**63 - 1, integer=True)  # of fit
@@ -425,22 +486,35 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             traces = as_traces(timeseries)
         good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
         n = len(good)
-        split_ss, torch_ss = np.random.SeedSequence(int(seed)).spawn(2)
-        order = np.random.default_rng(split_ss).permutation(n)
-        n_cal = round(self.conformal_fraction * n) if self.conformal_fraction > 0 else 0
-        rest = n - n_cal
-        n_val = max(round(self.val_fraction * rest), 1) if self.val_fraction > 0 else 0
-        if rest - n_val < 1 or (self.conformal_fraction > 0 and n_cal < 1):
-            raise ValueError(f"measured trips: {n} valid row(s) are too few to fit with "
-                             f"val_fraction={self.val_fraction!r} and conformal_fraction="
-                             f"{self.conformal_fraction!r}")
-        cal_idx = np.sort(order[:n_cal])
-        val_idx = np.sort(order[n_cal:n_cal + n_val])
-        tr_idx = np.sort(order[n_cal + n_val:])
-        for attr in ("posterior_", "conformal_"):
-            setattr(self, attr, None)
+        codes = group_codes(groups, measured_trips, n)
+        if groups is not None and len(np.unique(codes)) < 2 and n > 1:
+            warnings.warn(f"groups: all {n} trips are in one group, so no split can keep groups "
+                          "apart; every trip is its own group instead (coverage on new groups "
+                          "is not assessed)", CalibrationWarning, stacklevel=2)
+            codes = np.arange(n)
+        split_ss, torch_ss, cv_ss = np.random.SeedSequence(int(seed)).spawn(3)
+        rng = np.random.default_rng(split_ss)
+        mode = self._conformal_mode(n)
+        cal = (group_holdout(codes, self.conformal_fraction, rng) if mode == "split"
+               else np.zeros(n, dtype=bool))
+        rest = np.flatnonzero(~cal)
+        val = np.zeros(n, dtype=bool)
+        if self.val_fraction > 0:
+            val[rest[group_holdout(codes[rest], self.val_fraction, rng)]] = True
+        cal_idx, val_idx = np.flatnonzero(cal), np.flatnonzero(val)
+        tr_idx = np.flatnonzero(~cal & ~val)
+        n_cal, n_val = len(cal_idx), len(val_idx)
+        if len(tr_idx) < 1 or (mode == "split" and n_cal < 1) or (
+                self.val_fraction > 0 and n_val < 1) or (mode == "cv+" and len(
+                np.unique(codes)) < 2):
+            raise ValueError(f"measured trips: {n} valid row(s) in {len(np.unique(codes))} "
+                             f"group(s) are too few to fit with val_fraction="
+                             f"{self.val_fraction!r}, conformal={self.conformal!r} and "
+                             f"conformal_fraction={self.conformal_fraction!r}")
+        for attr in ("posterior_", "conformal_", "cv_nets_", "domain_"):
+            setattr(self, attr, None if attr != "cv_nets_" else [])
         if self._residual:  # the calibration trips stay out of the physics posterior too
-            self._fit_posterior(good.iloc[np.sort(order[n_cal:])], seed, traces)
+            self._fit_posterior(good.iloc[rest], seed, traces)
         phys = self._physics(good, traces)
         names = self._feature_names()
         x = trip_features(phys, names)
@@ -456,25 +530,26 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         self.target_std_ = sd if sd > 1e-12 else 1.0
         xs = ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
         ys = ((y - self.target_mean_) / self.target_std_).astype(np.float32)
-        net, hist = train_ensemble(
-            xs[tr_idx], ys[tr_idx], xs[val_idx] if n_val else None,
-            ys[val_idx] if n_val else None, n_members=int(self.n_members),
-            hidden=tuple(int(h) for h in self.hidden), dropout=float(self.dropout),
-            heteroscedastic=bool(self.heteroscedastic), max_epochs=int(self.max_epochs),
-            patience=int(self.patience), batch_size=int(self.batch_size),
-            learning_rate=float(self.learning_rate), weight_decay=float(self.weight_decay),
-            lr_decay=float(self.lr_decay), lr_decay_every=int(self.lr_decay_every),
-            seed=int(torch_ss.generate_state(1)[0]), progress=progress)
+        self.domain_ = TrainingDomain.fit(phys, xs, traces=traces)
+        net, hist = self._train_net(xs, ys, tr_idx, val_idx, int(torch_ss.generate_state(1)[0]),
+                                    progress)
         self.net_ = net
         self.history_ = hist
-        d_fit = good["distance_km"].to_numpy(float)[np.sort(order[n_cal:])]
+        d_fit = good["distance_km"].to_numpy(float)[rest]  # the trips the networks learn from
         self.fit_info_ = {"distance_km_range": [float(d_fit.min()), float(d_fit.max())]}
         self.n_parameters_ = net.n_parameters_per_member
         if n_cal:
             _, dist = self._distribution(good.iloc[cal_idx], seed=int(seed), traces=traces)
             self.conformal_ = NormalizedConformal.fit(e_meas[cal_idx], dist.mean(), dist.std())
+        elif mode == "cv+":
+            fit_cv_plus(self, good, traces, codes, xs, ys, e_meas, seed, cv_ss)
+        warn_calibration(self, codes, cal_idx)
+        self.mondrian_cut_km_ = float(np.median(good["distance_km"]))
+        self.conformal_bins_ = mondrian_bins(good.iloc[cal_idx] if n_cal else good,
+                                             self.mondrian_cut_km_)
         info = {"n_trips": n, "n_train": len(tr_idx), "n_val": n_val, "n_cal": n_cal,
-                "seed": int(seed), **self.fit_info_,
+                "n_groups": len(np.unique(codes)), "conformal": mode,
+                "cv_folds": len(self.cv_nets_), "seed": int(seed), **self.fit_info_,
                 "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
                 "n_parameters_per_member": self.n_parameters_}
         if n_val:
@@ -486,14 +561,36 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         self.fit_info_ = info
         return self
 
+    def _conformal_mode(self, n_trips: int) -> str:
+        """The conformal step a fit on ``n_trips`` trips runs: "split", "cv+" or "none"."""
+        if self.conformal_fraction == 0:
+            return "none"
+        if self.conformal == "auto":
+            return "cv+" if n_trips < CV_PLUS_MAX_TRIPS else "split"
+        return self.conformal
+
+    def _train_net(self, xs, ys, tr_idx, val_idx, seed: int, progress=None):
+        """Train the residual ensemble on rows ``tr_idx``, early stopping on ``val_idx``."""
+        v = len(val_idx) > 0
+        return train_ensemble(
+            xs[tr_idx], ys[tr_idx], xs[val_idx] if v else None, ys[val_idx] if v else None,
+            n_members=int(self.n_members),
+            hidden=tuple(int(h) for h in self.hidden), dropout=float(self.dropout),
+            heteroscedastic=bool(self.heteroscedastic), max_epochs=int(self.max_epochs),
+            patience=int(self.patience), batch_size=int(self.batch_size),
+            learning_rate=float(self.learning_rate), weight_decay=float(self.weight_decay),
+            lr_decay=float(self.lr_decay), lr_decay_every=int(self.lr_decay_every),
+            seed=int(seed), progress=progress)
+
     def predict(self, trips: pd.DataFrame, *, timeseries=None) -> pd.DataFrame:
         """Predict trip energy and final SoC.
 
         Parameters
         ----------
-        trips : pandas.DataFrame
+        trips : pandas.DataFrame or MeasuredTrips
             A trip table; ``mode`` may be missing or ``None`` and ``hour``
-            missing (see the module docstring).
+            missing (see the module docstring). A
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
         timeseries : LoggedTraces or pandas.DataFrame, optional
             Logged speed traces by ``trip_id`` (see :meth:`fit`).
 
@@ -508,17 +605,22 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             networks hold the residual outside the training distances
             (:mod:`hybridev.learning.physical`).
             With a physics posterior (``calibrate_physics=True``) the physics
-            columns are those of the posterior-median parameters.
+            columns are those of the posterior-median parameters. A fitted
+            model adds ``domain_score`` and ``in_domain``
+            (:mod:`hybridev.learning.domain`).
 
         Warns
         -----
         PhysicsFallbackWarning
             When the model is not fitted: ``energy_kwh_pred`` is the physics.
+        OutOfDomainWarning
+            Once, with the count, when some trips lie outside the training domain.
         """
         if not hasattr(self, "net_") and not self._fallback_to_physics:
             self._require_fitted()
         self._check_params()
-        out = self._physics(trips, as_traces(timeseries))  # validates the trips
+        trips, traces = unpack_trips(trips, timeseries)
+        out = self._physics(trips, traces)  # validates the trips
         e_phys = out["energy_kwh_physics"].to_numpy(float)
         if hasattr(self, "net_"):
             held, factor = held_feature_table(self, out)  # learning.physical
@@ -534,6 +636,9 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         out["energy_kwh_pred"] = energy
         out["soc_final_pred"] = soc_from_energy(out["soc_initial"].to_numpy(float), energy,
                                                 self._vehicle().battery_capacity_kwh)
+        if getattr(self, "domain_", None) is not None:  # in_domain, domain_score; warns
+            out["domain_score"], out["in_domain"] = self.domain_.score(out, traces)
+            warn_out_of_domain(int((~out["in_domain"]).sum()), len(out))
         return out
 
     # -- persistence ----------------------------------------------------------------------

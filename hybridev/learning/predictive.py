@@ -71,9 +71,10 @@ class EnergyDistribution:
     residual_std_kwh : numpy.ndarray, shape (n_members, n_trips), kWh
         Each member's aleatoric noise scale ``sigma_m`` (zeros for a
         point network without variance head).
-    spread_factor : float
+    spread_factor : float or numpy.ndarray, shape (n_trips,)
         Conformal factor applied to all spread (physics and residual
-        deviations from their centre); 1 means uncalibrated.
+        deviations from their centre); 1 means uncalibrated. Per trip when
+        some trips are out of the training domain (their spread is widened).
 
     Examples
     --------
@@ -98,8 +99,12 @@ class EnergyDistribution:
             raise ValueError(
                 "EnergyDistribution needs physics_draws_kwh (n_draws, n_trips) and residual "
                 f"mean/std (n_members, n_trips); got {p.shape}, {mu.shape}, {sd.shape}")
-        if not (np.isfinite(self.spread_factor) and self.spread_factor > 0):
-            raise ValueError(f"spread_factor={self.spread_factor!r} must be finite and > 0")
+        c = np.asarray(self.spread_factor, float)
+        if not (c.ndim == 0 or c.shape == (p.shape[1],)) or not (
+                np.all(np.isfinite(c)) and np.all(c > 0)):
+            raise ValueError(f"spread_factor={self.spread_factor!r} must be finite and > 0, "
+                             f"a number or one per trip ({p.shape[1]})")
+        object.__setattr__(self, "spread_factor", float(c) if c.ndim == 0 else c)
         object.__setattr__(self, "physics_draws_kwh", p)
         object.__setattr__(self, "residual_mean_kwh", mu)
         object.__setattr__(self, "residual_std_kwh", sd)
@@ -119,7 +124,8 @@ class EnergyDistribution:
             means = (p_mean[None, :] + self.residual_mean_kwh).T
             var = (p_var[None, :] + self.residual_std_kwh**2).T
             k = means.shape[1]
-            c = self.spread_factor
+            c = np.reshape(self.spread_factor, (-1, 1)) if np.ndim(self.spread_factor) else \
+                self.spread_factor
             centre = means.mean(axis=1, keepdims=True)
             means = centre + c * (means - centre)
             stds = c * np.sqrt(var)

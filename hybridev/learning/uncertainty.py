@@ -3,8 +3,9 @@
 The user's design, beyond the paper: an emcee posterior over the physics
 parameters (:func:`hybridev.bayes.sampler.calibrate_physics`) combined with a deep
 ensemble of residual networks with mean and variance heads
-(:mod:`hybridev.learning.nn`), made to cover by a split-conformal step
-(:mod:`hybridev.learning.conformal`).
+(:mod:`hybridev.learning.nn`), made to cover by a conformal step
+(:mod:`hybridev.learning.conformal`: CV+ on small fleets, split conformal on
+large ones, optionally per bin, :mod:`hybridev.learning.mondrian`).
 
 For a trip with features ``x``, posterior draws ``theta_d`` (d = 1..D) and
 members ``m`` (m = 1..M):
@@ -15,10 +16,14 @@ where ``theta_hat`` is the posterior median (the physics the network was
 trained against). :class:`hybridev.learning.predictive.EnergyDistribution` holds the
 pieces; its mean is the point prediction ``energy_kwh_pred``.
 
-Intervals (:meth:`ProbabilisticMixin.predict_interval`) are normalised split-
-conformal intervals ``mu +- q_level * s`` of energy, with ``mu`` and ``s`` the
-mean and standard deviation of that distribution and ``q_level`` from
-calibration trips held out of every other fitting step. Final SoC
+Intervals (:meth:`ProbabilisticMixin.predict_interval`) are normalised
+conformal intervals of energy: split conformal ``mu +- q_level * s``, with
+``mu`` and ``s`` the mean and standard deviation of that distribution and
+``q_level`` from calibration trips held out of every other fitting step, or
+CV+ (:meth:`~hybridev.learning.conformal.CVPlusConformal.cv_interval`) from the
+fold ensembles' means and spreads and the out-of-fold scores (widened to hold
+``mu``). Trips outside the training domain get the wider out-of-domain
+interval ``mu +- z s_ood`` (:mod:`hybridev.learning.ood`). Final SoC
 ``s0 - E / C`` (clipped to [0, 1]) is monotone in energy, so the SoC interval is the image
 of the energy interval, except for trips that may empty the battery (energy
 upper bound at or above ``s0 C``): their SoC has a point mass at 0, a central
@@ -38,30 +43,37 @@ spread and raises a ``ValueError`` saying how to get one; a ``level`` above
 and raises too.
 
 Trips without a ``mode`` get the posterior-weighted (``missing_mode="infer"``)
-or equal-weight mixture mean of the three profiles' physics; the spread
-between the profiles is not part of the physics draws, so it is carried by
-the members' noise heads (when the training trips were unlabelled too) and by
-the conformal step. Intervals for unlabelled trips from a model fitted and
-calibrated on labelled ones are therefore not covered by the conformal
-guarantee.
+or equal-weight mixture mean of the three profiles' physics. When the model
+was trained on unlabelled trips too, the spread between the profiles is
+carried by the members' noise heads and the conformal step; when every
+training trip had a mode, such trips are out of the domain and the spread
+between the three modes' predictions is added (:mod:`hybridev.learning.ood`).
 
 ``confidence`` is the predictive standard deviation ``s`` of the trip energy
 in kWh (aleatoric noise of the members, their disagreement, and the physics
-posterior spread): higher means less sure. The conformal factor multiplies all
-trips alike, so it does not change the ranking and is not applied.
+posterior spread; ``s_ood`` out of the domain): higher means less sure.
+``confidence_rel`` divides it by the energy scale ``max(|E|, 0.05 kWh/km d)``:
+scale-free, it ranks the relative error rather than the trip size, and rises
+as trips leave the training domain. The conformal factor multiplies all trips
+alike, so it does not change the ranking and is not applied.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.special import ndtri
 from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.checks import check_seed
-from hybridev.data.timeseries import as_traces
-from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
+from hybridev.learning.cvplus import nets_from_arrays, nets_to_arrays
+from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.inputs import unpack_trips
+from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
+from hybridev.learning.ood import OutOfDomainMixin
 from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 from hybridev.physics.stats import energy_from_stats
@@ -81,7 +93,7 @@ def _check_level(level) -> None:
                          "(a confidence level, e.g. 0.9)")
 
 
-class ProbabilisticMixin:
+class ProbabilisticMixin(OutOfDomainMixin):
     """Physics posterior, predictive distributions and conformal intervals for HybridModel."""
 
     # -- physics -----------------------------------------------------------------------
@@ -151,6 +163,16 @@ class ProbabilisticMixin:
     def _distribution(self, trips: pd.DataFrame, *, seed: int = 0, traces=None
                       ) -> tuple[pd.DataFrame, EnergyDistribution]:
         """Physics table and the raw (spread factor 1) predictive distribution."""
+        table, dists = self._distributions(trips, seed=seed, traces=traces)
+        return table, dists[0]
+
+    def _distributions(self, trips: pd.DataFrame, *, seed: int = 0, traces=None,
+                       nets=(None,)) -> tuple[pd.DataFrame, list[EnergyDistribution]]:
+        """Physics table and one raw predictive distribution per ensemble in ``nets``.
+
+        ``None`` in ``nets`` is the fitted ensemble ``net_``; the others are CV+
+        fold ensembles. All share the physics draws.
+        """
         self._require_fitted()
         if getattr(self, "posterior_", None) is not None:
             table, draws = self._posterior_physics(self._validated(trips),
@@ -161,14 +183,18 @@ class ProbabilisticMixin:
         e_p = table["energy_kwh_physics"].to_numpy(float)
         held, factor = held_feature_table(self, table)  # learning.physical
         scale = self._target_scale(e_p, table["distance_km"].to_numpy(float)) * factor
-        mean, var = self._residual_moments(self._features(held), scale)
-        std = np.zeros_like(mean) if var is None else np.sqrt(var)
+        feats = self._features(held)
         if not self._residual:  # PureML: no physics part
             centred = np.zeros_like(draws)
         else:
             centred = draws - draws.mean(axis=0)
             centred += e_p
-        return table, EnergyDistribution(centred, mean, std)
+        dists = []
+        for net in nets:
+            mean, var = self._residual_moments(feats, scale, net=net)
+            std = np.zeros_like(mean) if var is None else np.sqrt(var)
+            dists.append(EnergyDistribution(centred, mean, std))
+        return table, dists
 
     def _conformal_factor(self, level: float) -> float | None:
         """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""
@@ -182,8 +208,13 @@ class ProbabilisticMixin:
                 f"level={level!r} is too high for the {cp.n_calibration} calibration trips: "
                 f"the highest level they support is "
                 f"{cp.n_calibration / (cp.n_calibration + 1):.3f} (n / (n + 1)); use a lower "
-                "level or fit on more trips / a larger conformal_fraction")
+                "level or fit on more trips (CV+ uses every trip, see conformal=)")
         return q
+
+    def _cv_nets(self) -> list:
+        cp = getattr(self, "conformal_", None)
+        nets = getattr(self, "cv_nets_", None) or []
+        return nets if isinstance(cp, CVPlusConformal) and len(nets) == cp.n_folds else []
 
     def predict_distribution(self, trips: pd.DataFrame, *, level: float = 0.9,
                              seed: int = 0, timeseries=None) -> EnergyDistribution:
@@ -191,12 +222,15 @@ class ProbabilisticMixin:
 
         Parameters
         ----------
-        trips : pandas.DataFrame
-            Trip table (``mode`` may be missing).
+        trips : pandas.DataFrame or MeasuredTrips
+            Trip table (``mode`` may be missing); a
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
         level : float
             Confidence level in (0, 1) whose conformal correction sets the
             spread factor (see
             :meth:`hybridev.learning.conformal.NormalizedConformal.spread_factor`).
+            Out-of-domain trips get the larger of that spread and their
+            out-of-domain spread (a per-trip factor).
         seed : int
             Seeds the choice of posterior draws.
         timeseries : LoggedTraces or pandas.DataFrame, optional
@@ -214,16 +248,25 @@ class ProbabilisticMixin:
         ValueError
             On a bad ``level`` (or one too high for the calibration trips) or
             a model without predictive spread.
+
+        Warns
+        -----
+        OutOfDomainWarning
+            Once, with the count, when some trips lie outside the training domain.
         """
         self._require_probabilistic("predict_distribution")
         check_seed(seed)
         q = self._conformal_factor(level)
-        _, dist = self._distribution(trips, seed=seed, traces=as_traces(timeseries))
-        if q is None:
-            return dist
-        factor = self.conformal_.spread_factor(level)
+        trips, traces = unpack_trips(trips, timeseries)
+        table, dist = self._distribution(trips, seed=seed, traces=traces)
+        factor = 1.0 if q is None else max(self.conformal_.spread_factor(level), 1e-6)
+        _, ok, sd_ood = self._ood_spread(table, dist, traces)
+        sd = np.maximum(dist.std(), 1e-12)
+        per_trip = np.where(ok, factor, np.maximum(factor, sd_ood / sd))
+        if np.all(per_trip == factor):
+            per_trip = factor
         return EnergyDistribution(dist.physics_draws_kwh, dist.residual_mean_kwh,
-                                  dist.residual_std_kwh, spread_factor=max(factor, 1e-6))
+                                  dist.residual_std_kwh, spread_factor=per_trip)
 
     def predict_interval(self, trips: pd.DataFrame, level: float = 0.9, *,
                          seed: int = 0, timeseries=None) -> pd.DataFrame:
@@ -231,8 +274,9 @@ class ProbabilisticMixin:
 
         Parameters
         ----------
-        trips : pandas.DataFrame
-            Trip table (``mode`` may be missing).
+        trips : pandas.DataFrame or MeasuredTrips
+            Trip table (``mode`` may be missing); a
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
         level : float
             Confidence level in (0, 1), e.g. 0.9 for a 90 % interval.
         seed : int
@@ -245,9 +289,13 @@ class ProbabilisticMixin:
         pandas.DataFrame
             A copy of ``trips`` with the physics columns plus
             ``energy_kwh_pred``, ``energy_kwh_lo``, ``energy_kwh_hi`` (kWh),
-            ``soc_final_pred``, ``soc_final_lo``, ``soc_final_hi`` (in [0, 1])
-            and ``confidence`` (kWh, the predictive standard deviation; higher
-            means less sure). See the module docstring for the construction.
+            ``soc_final_pred``, ``soc_final_lo``, ``soc_final_hi`` (in [0, 1]),
+            ``in_domain`` (bool) and ``domain_score`` (see
+            :mod:`hybridev.learning.domain`), ``confidence`` (kWh, the
+            predictive standard deviation, out-of-domain spread included;
+            higher means less sure) and ``confidence_rel`` (``confidence``
+            over the energy scale ``max(|E|, 0.05 kWh/km d)``: scale-free,
+            ranks the relative error). See the module docstring.
 
         Raises
         ------
@@ -256,6 +304,11 @@ class ProbabilisticMixin:
         ValueError
             On a bad ``level`` (or one too high for the calibration trips) or
             a model without predictive spread (the paper's point model).
+
+        Warns
+        -----
+        OutOfDomainWarning
+            Once, with the count, when some trips lie outside the training domain.
 
         Examples
         --------
@@ -272,18 +325,38 @@ class ProbabilisticMixin:
         self._require_probabilistic("predict_interval")
         check_seed(seed)
         q = self._conformal_factor(level)
-        table, dist = self._distribution(trips, seed=seed, traces=as_traces(timeseries))
+        trips, traces = unpack_trips(trips, timeseries)
+        cv = self._cv_nets()
+        table, dists = self._distributions(trips, seed=seed, traces=traces, nets=(None, *cv))
+        dist = dists[0]
         mu, sd = dist.mean(), dist.std()
         e_p = table["energy_kwh_physics"].to_numpy(float)
         floor = np.minimum(e_p, 0.0) if self._residual else np.zeros_like(e_p)
         floor = np.maximum(floor, energy_floor_kwh(table, self._vehicle()))  # learning.physical
-        if q is not None:
+        if cv:
+            fm = np.stack([d.mean() for d in dists[1:]])
+            fs = np.maximum(np.stack([d.std() for d in dists[1:]]), 1e-12)
+            lo, hi = self.conformal_.cv_interval(fm, fs, level)
+            lo_one = self.conformal_.cv_lower_bound(fm, fs, level)
+        elif q is not None:
             lo, hi = mu - q * sd, mu + q * sd
             lo_one = self.conformal_.lower_bound(mu, sd, level)
         else:
             lo, hi = dist.interval(level)
             lo_one = dist.quantile(1.0 - level)
+        if self.mondrian and q is not None:  # per-bin calibration where the data allow
+            mlo, mhi, used = mondrian_interval(
+                self.conformal_, self.conformal_bins_,
+                mondrian_bins(table, self.mondrian_cut_km_), level, mean=mu, std=sd,
+                fold_means=fm if cv else None, fold_stds=fs if cv else None)
+            lo, hi = np.where(used, mlo, lo), np.where(used, mhi, hi)
         point = np.maximum(mu, floor)
+        lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
+        score, ok, sd_ood = self._ood_spread(table, dist, traces)
+        z2, z1 = float(ndtri(0.5 + level / 2.0)), float(ndtri(level))
+        lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
+        hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))
+        lo_one = np.where(ok, lo_one, np.minimum(lo_one, mu - z1 * sd_ood))
         lo, hi, lo_one = (np.maximum(a, floor) for a in (lo, hi, lo_one))
         lo_one = np.minimum(lo_one, point)  # the SoC interval always holds the point prediction
         cap = self._vehicle().battery_capacity_kwh
@@ -296,8 +369,16 @@ class ProbabilisticMixin:
         out["soc_final_pred"] = soc_from_energy(s0, point, cap)
         out["soc_final_lo"] = np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap))
         out["soc_final_hi"] = soc_from_energy(s0, np.where(may_empty, lo_one, lo), cap)
-        out["confidence"] = sd
+        out["in_domain"] = ok
+        out["domain_score"] = score
+        conf = np.where(ok, sd, np.maximum(sd, sd_ood))
+        out["confidence"] = conf
+        out["confidence_rel"] = conf / self._target_scale_any(point, table)
         return out
+
+    def _target_scale_any(self, energy_kwh, table: pd.DataFrame) -> np.ndarray:
+        """Energy scale ``max(|E|, 0.05 kWh/km * d)`` of the relative confidence, kWh."""
+        return np.maximum(np.abs(energy_kwh), 0.05 * table["distance_km"].to_numpy(float))
 
     @property
     def capacity_kwh(self) -> float:
@@ -318,6 +399,16 @@ class ProbabilisticMixin:
         cp = getattr(self, "conformal_", None)
         if cp is not None:
             arrays["conformal_residuals"] = cp.residuals
+        if cp is not None and getattr(self, "conformal_bins_", None) is not None:
+            doc["mondrian_cut_km"] = self.mondrian_cut_km_
+            arrays["conformal_bins"] = np.asarray(self.conformal_bins_, np.int64)
+        if self._cv_nets():
+            doc["cv_folds"] = len(self.cv_nets_)
+            arrays["conformal_fold"] = cp.fold
+            arrays.update(nets_to_arrays(self.cv_nets_))
+        dom = getattr(self, "domain_", None)
+        if dom is not None:
+            arrays.update({f"domain.{k}": v for k, v in dom.to_arrays().items()})
         return doc, arrays
 
     def _set_extra_state(self, doc: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -330,3 +421,13 @@ class ProbabilisticMixin:
                 "mode_weights": arrays.get("posterior_mode_weights")})
         if "conformal_residuals" in arrays:
             self.conformal_ = NormalizedConformal(arrays["conformal_residuals"])
+        if "mondrian_cut_km" in doc:
+            self.mondrian_cut_km_ = float(doc["mondrian_cut_km"])
+            self.conformal_bins_ = np.asarray(arrays["conformal_bins"], np.int64)
+        if "cv_folds" in doc:
+            self.conformal_ = CVPlusConformal(arrays["conformal_residuals"],
+                                              arrays["conformal_fold"])
+            self.cv_nets_ = nets_from_arrays(self, arrays, int(doc["cv_folds"]))
+        if any(k.startswith("domain.") for k in arrays):
+            self.domain_ = TrainingDomain.from_arrays(
+                {k[len("domain."):]: v for k, v in arrays.items() if k.startswith("domain.")})

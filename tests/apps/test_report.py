@@ -126,6 +126,12 @@ def test_summary_matches_recomputation_from_predictions(run):
                                                                   rel=1e-9)
     rho = stats.spearmanr(p["confidence"], np.abs(p["energy_kwh_pred"] - y)).statistic
     assert s["metrics"]["hybrid"]["spearman_confidence"] == pytest.approx(rho, abs=1e-12)
+    bins = s["metrics"]["hybrid"]["by_bin"]  # coverage by condition adds up to the total
+    assert sum(b["n"] for b in bins) == len(p)
+    assert sum(b["n"] * b["coverage"] for b in bins) / len(p) == pytest.approx(
+        s["metrics"]["hybrid"]["coverage"][f"{lv:g}"], abs=1e-12)
+    rel = stats.spearmanr(p["confidence_rel"], np.abs(p["energy_kwh_pred"] - y) / y).statistic
+    assert s["metrics"]["hybrid"]["spearman_confidence_rel"] == pytest.approx(rel, abs=1e-12)
     n_flag = int(np.ceil(0.1 * len(p)))
     top = p.nlargest(n_flag, "confidence")["trip_id"]
     assert [f["trip_id"] for f in s["flagged"]] == top.tolist()

@@ -36,7 +36,8 @@ def test_fit_writes_a_model_and_predict_writes_predictions(files, tmp_path, caps
     assert (files / "model" / "model.json").is_file()
     doc = json.loads((files / "model" / "model.json").read_text())
     assert doc["config"]["n_members"] == 5 and doc["config"]["calibrate_physics"] is True
-    assert doc["fit_info"]["n_cal"] == 9  # 15 % of 60 held out for the conformal step
+    # 60 trips (< CV_PLUS_MAX_TRIPS): CV+ calibrates on every trip, none held out
+    assert doc["fit_info"]["conformal"] == "cv+" and doc["fit_info"]["n_cal"] == 0
     capsys.readouterr()
     assert main(["predict", str(files / "model"), str(files / "trips.csv"),
                  "--out", str(tmp_path / "pred.csv")]) == 0
@@ -62,7 +63,7 @@ def test_fit_options_members_and_seed(files, tmp_path):
     c = doc["config"]
     assert c["n_members"] == 2 and c["heteroscedastic"] is True
     assert c["calibrate_physics"] is False and c["conformal_fraction"] == 0.25
-    assert doc["fit_info"]["seed"] == 3 and doc["fit_info"]["n_cal"] == 15
+    assert doc["fit_info"]["seed"] == 3 and doc["fit_info"]["conformal"] == "cv+"
     assert "posterior" not in doc["extra"]
 
 
@@ -130,7 +131,7 @@ def test_fit_skip_bad_rows_reports_them(files, tmp_path, capsys):
     (["predict", "{d}/model", "{d}/trips.csv", "--out", "{t}/p.csv", "--level", "1.5"],
      "level=1.5 is outside the allowed range (0, 1)"),
     (["predict", "{d}/model", "{d}/trips.csv", "--out", "{t}/p.csv", "--level", "0.99"],
-     "too high for the 9 calibration trips"),
+     "too high for the 60 calibration trips"),
     (["predict", "{d}/paper", "{d}/trips.csv", "--out", "{t}/p.csv", "--level", "0.9"],
      "has no predictive spread"),
     (["predict", "{d}/model", "{d}/trips.csv", "--out", "{t}/p.csv", "--level", "0.9",

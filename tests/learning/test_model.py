@@ -89,7 +89,8 @@ def test_learns_a_smooth_residual(fitted, data):
 def test_predict_columns_and_soc(fitted, data):
     trips = data[1].drop(columns=["energy_kwh"]).head(20)
     out = fitted.predict(trips)
-    assert list(out.columns) == [*trips.columns, *PHYS_COLS, "energy_kwh_pred", "soc_final_pred"]
+    assert list(out.columns) == [*trips.columns, *PHYS_COLS, "energy_kwh_pred", "soc_final_pred",
+                                 "domain_score", "in_domain"]
     np.testing.assert_allclose(out.soc_final_pred,
                                np.maximum(0.0, out.soc_initial - out.energy_kwh_pred / 75.0))
     assert (out.energy_kwh_pred > 0).all()
@@ -355,7 +356,7 @@ def prob(small):
     mp = pytest.MonkeyPatch()
     mp.setattr(unc, "calibrate_physics", spy)
     try:
-        m = HybridModel(n_steps=N_STEPS, max_epochs=2).fit(small, seed=0)
+        m = HybridModel(n_steps=N_STEPS, max_epochs=2, conformal="split").fit(small, seed=0)
     finally:
         mp.undo()
     return m, seen
@@ -383,7 +384,8 @@ def test_default_physics_is_the_posterior_median(prob, small):
     m, _ = prob
     trips = small.drop(columns=["energy_kwh"])
     out = m.predict(trips)
-    assert list(out.columns) == [*trips.columns, *PHYS_COLS, "energy_kwh_pred", "soc_final_pred"]
+    assert list(out.columns) == [*trips.columns, *PHYS_COLS, "energy_kwh_pred", "soc_final_pred",
+                                 "domain_score", "in_domain"]
     med = {k: v for k, v in m.posterior_.median().items() if k != "noise_rel"}
     exact = simulate_measured(trips, true_params=med, noise_rel=0.0,
                               n_steps=N_STEPS).energy_kwh_true.to_numpy()

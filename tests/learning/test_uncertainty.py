@@ -31,7 +31,8 @@ CAP = 75.0  # kWh, the paper's vehicle
 PAPER = dict(PAPER_CONFIG)
 PHYS_COLS = ["energy_kwh_physics", "soc_final_physics", "max_speed_kmh", "kwh_per_km_physics"]
 OUT_COLS = ["energy_kwh_pred", "energy_kwh_lo", "energy_kwh_hi", "soc_final_pred",
-            "soc_final_lo", "soc_final_hi", "confidence"]
+            "soc_final_lo", "soc_final_hi", "in_domain", "domain_score", "confidence",
+            "confidence_rel"]
 
 
 def truth(n, seed, first_id, *, near_empty=False):
@@ -239,7 +240,7 @@ def test_trips_without_mode_fit_and_predict(small, missing_mode):
         assert m.posterior_.mode_weights is None
     trips = small.drop(columns=["energy_kwh"]).head(60)
     unknown = m.predict_interval(trips.assign(mode=None))
-    assert np.isfinite(unknown[OUT_COLS].to_numpy()).all()
+    assert np.isfinite(unknown[OUT_COLS].to_numpy(float)).all()
     assert (unknown.energy_kwh_lo <= unknown.energy_kwh_pred).all()
     assert (unknown.energy_kwh_pred <= unknown.energy_kwh_hi).all()
     # every spelling of "unknown" gives the same result

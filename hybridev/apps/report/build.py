@@ -306,6 +306,9 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
     for c in ("soc_final_pred", "soc_final_lo", "soc_final_hi"):
         pred[c] = tabs[i_main][c].to_numpy(float) if i_main in tabs else np.nan
     pred["confidence"] = hyb["confidence"].to_numpy(float)
+    for c in ("confidence_rel", "in_domain", "domain_score"):
+        if c in hyb:
+            pred[c] = hyb[c].to_numpy()
     done("evaluate")
     n_tr_g = n_te_g = None
     if group_column and group_column in measured.trips.columns:

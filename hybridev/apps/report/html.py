@@ -125,6 +125,14 @@ the central interval; CRPS: continuous ranked probability score; Spearman and AU
 predictive standard deviation against the absolute error (AUROC for flagging the worst 10 %).
 Nominal physics has no interval.</p>
 {_table(cov)}
+<h3>Hybrid by condition</h3>
+{_table(pd.DataFrame(s["metrics"]["hybrid"].get("by_bin", [])))}
+<p class="note">Coverage and mean width (over the measured energy) of the hybrid's main-level
+intervals per temperature band and trip length (long: at least the median held-out distance).
+Spearman with the absolute relative error: <code>confidence_rel</code>
+{_fmt(s["metrics"]["hybrid"].get("spearman_confidence_rel"), ".2f")}, distance
+{_fmt(s["metrics"]["hybrid"].get("spearman_distance"), ".2f")}, predicted energy
+{_fmt(s["metrics"]["hybrid"].get("spearman_energy_pred"), ".2f")} (size-only baselines).</p>
 {img["predicted"]}{img["reliability"]}
 <h2>Residuals</h2>{img["residuals"]}
 <h2>Calibrated physics parameters (training trips)</h2>

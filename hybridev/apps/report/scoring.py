@@ -120,6 +120,41 @@ def _parameters(post) -> list[dict]:
     return s.reset_index().to_dict(orient="records")
 
 
+def _by_condition(pred: pd.DataFrame) -> dict:
+    """Coverage and width per temperature band x trip length, and the scale-free confidence.
+
+    Bins as :mod:`hybridev.learning.mondrian` (long: at least the median held-out
+    distance). ``spearman_confidence_rel``: Spearman of ``confidence_rel`` with the
+    absolute relative error, beside the size-only baselines (distance, predicted energy).
+    """
+    from scipy.stats import spearmanr
+
+    from hybridev.learning.mondrian import bin_names, mondrian_bins
+
+    y = pred["energy_kwh"].to_numpy(float)
+    lo, hi = pred["energy_kwh_lo"].to_numpy(float), pred["energy_kwh_hi"].to_numpy(float)
+    inside = (y >= lo) & (y <= hi)
+    rel_w = (hi - lo) / np.maximum(y, 1e-9)
+    bins = mondrian_bins(pred, float(np.median(pred["distance_km"])))
+    names = bin_names()
+    rows = [{"bin": names[b], "n": int((bins == b).sum()),
+             "coverage": float(inside[bins == b].mean()),
+             "mean_rel_width": float(rel_w[bins == b].mean())} for b in np.unique(bins)]
+    err = np.abs(pred["energy_kwh_pred"].to_numpy(float) - y) / np.maximum(y, 1e-9)
+
+    def rho(col):
+        if col not in pred or len(y) < 3:
+            return None
+        r = spearmanr(pred[col].to_numpy(float), err)[0]
+        return None if not np.isfinite(r) else float(r)
+
+    out = {"by_bin": rows, "spearman_confidence_rel": rho("confidence_rel"),
+           "spearman_distance": rho("distance_km"), "spearman_energy_pred": rho("energy_kwh_pred")}
+    if "in_domain" in pred:
+        out["share_in_domain"] = float(pred["in_domain"].astype(bool).mean())
+    return out
+
+
 def _flagged(pred: pd.DataFrame) -> list[dict]:
     n_flag = max(1, math.ceil(FLAG_FRACTION * len(pred)))
     err = (pred["energy_kwh_pred"] - pred["energy_kwh"]).abs()
@@ -152,7 +187,11 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         ``mean_width_kwh`` and ``winkler_kwh`` at the main level,
         ``crps_kwh``, ``reliability``, ``miscalibration_area``,
         ``spearman_confidence`` and ``auroc_confidence`` (predictive sd vs
-        absolute error; AUROC for the worst 10 %). Also ``data``, ``split``,
+        absolute error; AUROC for the worst 10 %); for the hybrid also
+        ``by_bin`` (coverage and mean relative width per temperature band x
+        trip length), ``spearman_confidence_rel`` beside ``spearman_distance``
+        and ``spearman_energy_pred`` (against the absolute relative error)
+        and ``share_in_domain``. Also ``data``, ``split``,
         ``parameters`` (posterior of (b) vs nominal, 90 % intervals),
         ``diagnostics``, ``hybrid`` (fit information), ``flagged`` trips,
         ``rejected`` rows, ``labels`` and ``config``.
@@ -169,6 +208,7 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
     hyb["crps_kwh"] = (None if result.hybrid_mixture is None
                        else M.crps_mixture(y, *result.hybrid_mixture))
     hyb.update(_confidence(y, pred["energy_kwh_pred"], pred["confidence"]))
+    hyb.update(_by_condition(pred))
     rej = rejected if rejected is not None else pd.DataFrame(
         columns=["source", "row", "trip_id", "field", "value", "reason"])
     src = rej["source"] if "source" in rej.columns else pd.Series("trips", index=rej.index)

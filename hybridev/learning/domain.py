@@ -1,0 +1,239 @@
+"""The training domain of a fitted model: where its intervals can be trusted.
+
+At :meth:`hybridev.HybridModel.fit` the model records, for a few trip
+quantities, every value it was trained on (:class:`TrainingDomain`):
+
+========================  ===========================  =====================
+quantity                  from                          tolerance ``tol_f``
+========================  ===========================  =====================
+``temperature_c``         trip column                   3 degC
+``avg_speed_kmh``         trip column                   8 km/h
+``log_distance``          ``ln(distance_km)``           ``ln 1.5``
+``log_duration``          ``ln(distance / speed)``      ``ln 1.5``
+``grade_pct``             column, else logged trace,    1 %
+                          else 0
+========================  ===========================  =====================
+
+A new trip's gap in each quantity is the distance to the *nearest* training
+value, in units of the tolerance (beyond the training range, in units of a
+third of it, :data:`EDGE_FRACTION`: extrapolation is riskier); its ``domain_score`` is the largest gap over
+the quantities, so both a value outside the training range and one inside a
+wide gap of it count (the paper's synthetic design has only -5, 20 and 32 degC:
+a trip at 3 degC is 8 degC from any training trip, score 2.7). A trip is
+``in_domain`` when its score is at most 1. The tolerances are physical scales
+(a few degC of cabin/battery climate, a speed band, half again the distance),
+the same for every car.
+
+Inputs the model was trained with but a trip lacks also leave the domain
+(score at least :data:`MISSING_INPUT_SCORE`): a driving ``mode`` when every
+training trip had one, a logged trace when most training trips had one.
+
+Out-of-domain trips get intervals from the physics posterior predictive plus
+an inflation that grows with the score (see
+:func:`hybridev.learning.uncertainty` and :data:`OOD_INFLATION_PER_UNIT`), and
+the network inputs of every trip are clipped to their training range
+(:meth:`TrainingDomain.clip_features`), so that the residual does not
+extrapolate: outside the training distances it keeps its boundary value.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.core.errors import OutOfDomainWarning
+
+__all__ = [
+    "DOMAIN_QUANTITIES",
+    "DOMAIN_TOLERANCES",
+    "EDGE_FRACTION",
+    "MISSING_INPUT_SCORE",
+    "OOD_INFLATION_PER_UNIT",
+    "TrainingDomain",
+    "domain_quantities",
+    "warn_out_of_domain",
+]
+
+DOMAIN_QUANTITIES = ("temperature_c", "avg_speed_kmh", "log_distance", "log_duration",
+                     "grade_pct")
+"""Trip quantities whose training values define the domain."""
+
+DOMAIN_TOLERANCES = (3.0, 8.0, float(np.log(1.5)), float(np.log(1.5)), 1.0)
+"""Gap (in the quantity's unit) that makes a trip leave the domain, per quantity."""
+
+EDGE_FRACTION = 1.0 / 3.0
+"""Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 degC, ...):
+extrapolating is riskier than interpolating between training values."""
+
+MISSING_INPUT_SCORE = 2.0
+"""Domain score of a trip lacking an input the model was trained with."""
+
+OOD_INFLATION_PER_UNIT = 0.25
+"""Out-of-domain spread multiplier ``1 + 0.25 (score - 1)``, capped at 3 (score 9)."""
+
+_MAX_INFLATION = 3.0
+
+
+def domain_quantities(table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
+    """Domain quantities (n_trips, 5) and whether each trip has a logged trace.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Validated trips (``distance_km``, ``avg_speed_kmh``, ``temperature_c``,
+        optional ``grade_pct``, ``trip_id``).
+    traces : LoggedTraces, optional
+
+    Returns
+    -------
+    q : numpy.ndarray, shape (n_trips, 5)
+        In the order of :data:`DOMAIN_QUANTITIES`.
+    has_trace : numpy.ndarray of bool, shape (n_trips,)
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"distance_km": [10.0], "avg_speed_kmh": [40.0],
+    ...                   "temperature_c": [5.0]})
+    >>> q, tr = domain_quantities(t)
+    >>> q.round(2).tolist(), tr.tolist()
+    ([[5.0, 40.0, 2.3, -1.39, 0.0]], [False])
+    """
+    n = len(table)
+    d = table["distance_km"].to_numpy(float)
+    v = table["avg_speed_kmh"].to_numpy(float)
+    grade = (table["grade_pct"].to_numpy(float) if "grade_pct" in table.columns
+             else np.zeros(n))
+    has_trace = np.zeros(n, dtype=bool)
+    if traces is not None and len(traces) and "trip_id" in table.columns:
+        pos = pd.Index(traces.trip_id).get_indexer(table["trip_id"].to_numpy(object))
+        has_trace = pos >= 0
+        if has_trace.any() and "grade_pct" not in table.columns:
+            g = 100.0 * np.tan(traces.per_trip_mean(traces.grade_rad))
+            grade[has_trace] = g[pos[has_trace]]
+    q = np.column_stack([table["temperature_c"].to_numpy(float), v,
+                         np.log(np.maximum(d, 1e-3)),
+                         np.log(np.maximum(d, 1e-3) / np.maximum(v, 1e-3)),
+                         np.nan_to_num(grade)])
+    return q, has_trace
+
+
+@dataclass(frozen=True)
+class TrainingDomain:
+    """Values a model was trained on, to score how far new trips lie from them.
+
+    Parameters
+    ----------
+    values : tuple of numpy.ndarray
+        Sorted unique training values of each of :data:`DOMAIN_QUANTITIES`.
+    feature_lo, feature_hi : numpy.ndarray, shape (n_features,)
+        Range of the standardised network inputs over the training trips.
+    needs_mode : bool
+        Every training trip had a driving ``mode``.
+    needs_trace : bool
+        Most (> 50 %) training trips had a logged speed trace.
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"distance_km": [10.0, 12.0] * 3, "avg_speed_kmh": [40.0] * 6,
+    ...                   "temperature_c": [-5.0, -5.0, 20.0, 20.0, 32.0, 32.0]})
+    >>> dom = TrainingDomain.fit(t, np.zeros((6, 2)))
+    >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
+    >>> score, ok = dom.score(new)
+    >>> score.round(2).tolist(), ok.tolist()
+    ([0.33, 2.67, 13.0], [True, False, False])
+    """
+
+    values: tuple
+    feature_lo: np.ndarray
+    feature_hi: np.ndarray
+    needs_mode: bool = False
+    needs_trace: bool = False
+
+    @classmethod
+    def fit(cls, table: pd.DataFrame, features: np.ndarray, traces=None) -> TrainingDomain:
+        """Record the domain of the training ``table`` and standardised ``features``."""
+        q, has_trace = domain_quantities(table, traces)
+        x = np.asarray(features, float)
+        mode = table["mode"] if "mode" in table.columns else pd.Series([None] * len(table))
+        return cls(values=tuple(np.unique(q[:, j]) for j in range(q.shape[1])),
+                   feature_lo=x.min(axis=0), feature_hi=x.max(axis=0),
+                   needs_mode=bool(len(mode) and mode.notna().all()),
+                   needs_trace=bool(has_trace.mean() > 0.5) if len(has_trace) else False)
+
+    def gaps(self, table: pd.DataFrame, traces=None) -> np.ndarray:
+        """Distance to the nearest training value over the tolerance, (n_trips, 5)."""
+        q, _ = domain_quantities(table, traces)
+        out = np.empty_like(q)
+        for j, (vals, tol) in enumerate(zip(self.values, DOMAIN_TOLERANCES, strict=True)):
+            i = np.searchsorted(vals, q[:, j])
+            below = vals[np.clip(i - 1, 0, len(vals) - 1)]
+            above = vals[np.clip(i, 0, len(vals) - 1)]
+            near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
+            outside = np.maximum(vals[0] - q[:, j], q[:, j] - vals[-1])  # > 0 beyond the range
+            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
+        return out
+
+    def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
+        """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
+        n = len(table)
+        miss = np.zeros(n, dtype=bool)
+        if self.needs_mode:
+            mode = table["mode"] if "mode" in table.columns else pd.Series([None] * n)
+            miss |= mode.isna().to_numpy()
+        if self.needs_trace:
+            miss |= ~domain_quantities(table, traces)[1]
+        return miss
+
+    def score(self, table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
+        """``(domain_score, in_domain)`` per trip, shapes (n_trips,).
+
+        ``domain_score`` is the largest gap over the quantities (0 on a training
+        value, 1 at the tolerance), at least :data:`MISSING_INPUT_SCORE` for a
+        trip lacking a trained-with input; ``in_domain`` is ``score <= 1``.
+        """
+        s = self.gaps(table, traces).max(axis=1) if len(table) else np.zeros(0)
+        s = np.where(self.missing_inputs(table, traces), np.maximum(s, MISSING_INPUT_SCORE), s)
+        return s, s <= 1.0
+
+    def clip_features(self, x: np.ndarray) -> np.ndarray:
+        """Standardised network inputs held inside their training range (same shape)."""
+        return np.clip(x, self.feature_lo, self.feature_hi).astype(np.asarray(x).dtype)
+
+    @staticmethod
+    def inflation(score) -> np.ndarray:
+        """Spread multiplier of out-of-domain trips: ``1 + 0.25 (score - 1)``, in [1, 3]."""
+        s = np.asarray(score, float)
+        return np.clip(1.0 + OOD_INFLATION_PER_UNIT * (s - 1.0), 1.0, _MAX_INFLATION)
+
+    # -- persistence -------------------------------------------------------------------
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Arrays for the saved model (see :mod:`hybridev.learning.persist`)."""
+        out = {f"q{j}": v for j, v in enumerate(self.values)}
+        out.update(feature_lo=self.feature_lo, feature_hi=self.feature_hi,
+                   flags=np.array([self.needs_mode, self.needs_trace], dtype=np.int8))
+        return out
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> TrainingDomain:
+        """Inverse of :meth:`to_arrays` (ValueError on a missing array)."""
+        try:
+            values = tuple(np.asarray(a[f"q{j}"], float) for j in range(len(DOMAIN_QUANTITIES)))
+            flags = np.asarray(a["flags"]).astype(bool)
+            return cls(values, np.asarray(a["feature_lo"], float),
+                       np.asarray(a["feature_hi"], float), bool(flags[0]), bool(flags[1]))
+        except KeyError as exc:
+            raise ValueError(f"training domain: array {exc} is missing") from exc
+
+
+def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3) -> None:
+    """Warn (:class:`~hybridev.core.errors.OutOfDomainWarning`) when ``n_out > 0``."""
+    if n_out:
+        warnings.warn(
+            f"{n_out} of {n_trips} trip(s) lie outside the conditions the model was trained "
+            "on (temperature, speed, distance, duration, grade, or a missing mode / logged "
+            "trace it was trained with): see the in_domain and domain_score columns; their "
+            "intervals come from the physics posterior predictive, widened",
+            OutOfDomainWarning, stacklevel=stacklevel)

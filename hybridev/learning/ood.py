@@ -1,0 +1,98 @@
+"""Out-of-domain spread of the hybrid model's predictions (see :mod:`hybridev.learning.domain`).
+
+A trip outside the training domain gets the spread ``sd_ood`` instead of the
+model's own (conformally calibrated) one:
+
+* outside the training ranges or in a gap of them (largest gap ``g > 1``):
+  ``sqrt(var_draws + (noise_rel E_p)^2 + (mu - E_p)^2 + sd^2) * inflation(g)``,
+  the physics posterior predictive (posterior draws and the posterior's
+  relative noise ``noise_rel``), the model's own spread, and the residual's
+  departure from the physics (which the training data no longer vouch for),
+  times :meth:`~hybridev.learning.domain.TrainingDomain.inflation`;
+* lacking the ``mode`` every training trip had: marginalised over the three
+  modes: the spread between the three modes' predictions is added (no
+  inflation);
+* lacking the logged trace most training trips had: a gap of 2.
+
+Intervals of such trips are ``mu +- z_level * sd_ood`` (never narrower than
+the in-domain interval); :meth:`predict_distribution` scales each trip's spread
+by ``sd_ood / sd``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from hybridev.learning.domain import (
+    MISSING_INPUT_SCORE,
+    TrainingDomain,
+    domain_quantities,
+    warn_out_of_domain,
+)
+from hybridev.learning.features import MODE_NAMES
+from hybridev.learning.predictive import EnergyDistribution
+
+__all__ = ["OutOfDomainMixin"]
+
+_PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
+                    "kwh_per_km_physics")
+
+
+class OutOfDomainMixin:
+    """Domain scores and out-of-domain spreads for :class:`hybridev.HybridModel`."""
+
+    def _ood_spread(self, table: pd.DataFrame, dist: EnergyDistribution, traces
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(domain_score, in_domain, sd_ood)`` per trip; warns once when some are out.
+
+        ``sd_ood`` (kWh) of a trip outside the training ranges or in a gap of
+        them is the physics posterior predictive spread (posterior draws and
+        its relative noise) together with the model's own spread and the
+        residual's departure from the physics, times the inflation
+        :meth:`~hybridev.learning.domain.TrainingDomain.inflation` of its
+        largest gap. A trip only lacking the ``mode`` the model was trained
+        with is marginalised over the three modes instead: its spread adds
+        the spread between the three modes' predictions (no inflation). A trip
+        lacking a trained-with logged trace counts as a gap of 2.
+        """
+        score, ok, sd_ood = self._ood_sd(table, dist.mean(), dist.std(),
+                                         dist.physics_draws_kwh.var(axis=0), traces)
+        warn_out_of_domain(int((~ok).sum()), dist.n_trips, stacklevel=4)
+        return score, ok, sd_ood
+
+    def _ood_sd(self, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray,
+                var_draws: np.ndarray, traces=None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_ood_spread` from the pieces: means, spreads and physics-draw variances."""
+        dom = getattr(self, "domain_", None)
+        n = len(table)
+        if dom is None:
+            return np.zeros(n), np.ones(n, dtype=bool), sd
+        score, ok = dom.score(table, traces)
+        if ok.all():
+            return score, ok, sd
+        gap = dom.gaps(table, traces).max(axis=1)
+        no_trace = dom.needs_trace & ~domain_quantities(table, traces)[1]
+        gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
+        post = getattr(self, "posterior_", None)
+        noise = float(np.median(post.noise_rel)) if post is not None else 0.0
+        e_p = table["energy_kwh_physics"].to_numpy(float)
+        var_pp = var_draws + (noise * e_p) ** 2 + (mu - e_p) ** 2 + sd**2
+        sd_ood = np.where(gap > 1.0, np.sqrt(var_pp) * TrainingDomain.inflation(gap), sd)
+        no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
+                   else np.zeros(n, dtype=bool))
+        if no_mode.any():
+            sub = table.loc[no_mode, [c for c in table.columns if c not in _PHYSICS_COLUMNS]]
+            mus = np.stack([self._mode_prediction(sub.assign(mode=m), traces)
+                            for m in MODE_NAMES])
+            between = mus.var(axis=0) + (mu[no_mode] - mus.mean(axis=0)) ** 2
+            sd_ood[no_mode] = np.sqrt(sd_ood[no_mode] ** 2 + between)
+        return score, ok, sd_ood
+
+    def _mode_prediction(self, trips: pd.DataFrame, traces) -> np.ndarray:
+        """Point energy (kWh) of ``trips`` with their given modes, shape (n_trips,)."""
+        tab = self._physics(trips, traces)
+        e = tab["energy_kwh_physics"].to_numpy(float)
+        sc = self._target_scale(e, tab["distance_km"].to_numpy(float))
+        return self._combine(e, self._residual_moments(self._features(tab), sc)[0].mean(0))

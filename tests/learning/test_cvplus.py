@@ -1,0 +1,110 @@
+"""Tests of the CV+ step of HybridModel.fit (hybridev.learning.cvplus) and of groups=."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from hybridev import HybridModel, make_dataset
+from hybridev.core.errors import CalibrationWarning, OutOfDomainWarning
+from hybridev.data.logs import MeasuredTrips
+from hybridev.learning.conformal import CVPlusConformal
+
+FAST = dict(n_steps=100, max_epochs=30, calibrate_physics=False)
+
+
+@pytest.fixture(scope="module")
+def data():
+    d = make_dataset(260, truth="structured", seed=5, n_steps=100)
+    d["day"] = np.arange(len(d)) // 4  # four trips a day
+    return d
+
+
+def test_level_09_from_20_trips(data):
+    m = HybridModel(**FAST).fit(data.head(20), seed=0)
+    assert m.fit_info_["conformal"] == "cv+" and m.fit_info_["n_cal"] == 0
+    assert isinstance(m.conformal_, CVPlusConformal) and m.conformal_.n_calibration == 20
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        out = m.predict_interval(data.iloc[200:].drop(columns=["energy_kwh"]), 0.9)
+    assert np.isfinite(out[["energy_kwh_lo", "energy_kwh_hi"]].to_numpy()).all()
+    assert ((out.energy_kwh_lo <= out.energy_kwh_pred)
+            & (out.energy_kwh_pred <= out.energy_kwh_hi)).all()
+
+
+def test_auto_switches_to_split_above_the_threshold(data):
+    m = HybridModel(**(FAST | {"max_epochs": 2})).fit(data, seed=0)  # 260 >= CV_PLUS_MAX_TRIPS
+    assert m.fit_info_["conformal"] == "split" and m.fit_info_["n_cal"] == 39
+    assert not isinstance(m.conformal_, CVPlusConformal)
+
+
+def test_groups_stay_together_in_folds_and_warn_when_too_few(data):
+    d = data.head(40)
+    m = HybridModel(**FAST).fit(d, seed=0, groups="day")
+    fold = m.conformal_.fold
+    for g in np.unique(d.day):
+        assert len(np.unique(fold[(d.day == g).to_numpy()])) == 1
+    with pytest.warns(CalibrationWarning, match="group"):  # 30 % of 10 days: 3 days
+        HybridModel(**FAST, conformal="split", conformal_fraction=0.3).fit(
+            d, seed=0, groups="day")
+    with pytest.warns(CalibrationWarning, match="cannot calibrate 0.9"):
+        HybridModel(**FAST, conformal="split").fit(d.head(30), seed=0)
+
+
+def test_save_load_keeps_cv_plus_mondrian_and_domain(data, tmp_path):
+    m = HybridModel(**FAST, mondrian=True).fit(data.head(60), seed=0)
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    assert len(back.cv_nets_) == len(m.cv_nets_) == 5
+    test = data.iloc[200:230].drop(columns=["energy_kwh"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        a, b = m.predict_interval(test, 0.8), back.predict_interval(test, 0.8)
+    cols = ["energy_kwh_lo", "energy_kwh_hi", "domain_score", "confidence_rel"]
+    np.testing.assert_allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-5)
+
+
+def test_predict_methods_accept_measured_trips(data):
+    m = HybridModel(**FAST).fit(data.head(30), seed=0)
+    mt = MeasuredTrips(data.iloc[200:210].reset_index(drop=True), None,
+                       data.head(0).assign(source=[], row=[], field=[], value=[], reason=[]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        a = m.predict_interval(mt, 0.9)
+        b = m.predict_interval(mt.trips, 0.9)
+        assert m.predict(mt).energy_kwh_pred.equals(m.predict(mt.trips).energy_kwh_pred)
+        assert m.predict_distribution(mt).n_trips == 10
+    np.testing.assert_allclose(a.energy_kwh_hi, b.energy_kwh_hi)
+
+
+def test_bad_conformal_settings():
+    with pytest.raises(ValueError, match="conformal='jackknife'"):
+        HybridModel(conformal="jackknife")._check_params()
+    with pytest.raises(ValueError, match="cv_folds=1"):
+        HybridModel(cv_folds=1)._check_params()
+
+
+def test_one_group_falls_back_to_trips_with_a_warning(data):
+    with pytest.warns(CalibrationWarning, match="one group"):
+        m = HybridModel(**FAST).fit(data.head(20), seed=0, groups=np.zeros(20))
+    assert m.conformal_.n_folds == 5
+
+
+@pytest.mark.slow
+def test_cv_plus_model_coverage_sweep_on_small_fleets():
+    # The whole hybrid with CV+ on 20 and 40 trips of the structured truth (traces of the
+    # truth independent of the model's: truth seeds >= 50, physics_seed 0): mean coverage
+    # of 90 % intervals over 8 training draws, 500 test trips each. CV+ guarantees about
+    # >= 0.8 (1 - 2 alpha); it is conservative at these sizes. Tolerance: [0.85, 0.99].
+    test = make_dataset(500, truth="structured", seed=49, n_steps=100)
+    y = test["energy_kwh"].to_numpy()
+    for n in (20, 40):
+        cov = []
+        for rep in range(8):
+            train = make_dataset(n, truth="structured", seed=50 + rep, n_steps=100)
+            m = HybridModel(**FAST).fit(train, seed=rep)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", OutOfDomainWarning)
+                out = m.predict_interval(test.drop(columns=["energy_kwh"]), 0.9)
+            cov.append(np.mean((y >= out.energy_kwh_lo) & (y <= out.energy_kwh_hi)))
+        assert 0.85 <= np.mean(cov) <= 0.99, (n, cov)

@@ -1,0 +1,109 @@
+"""Tests of hybridev.learning.domain and of the model's domain awareness."""
+
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev import HybridModel, make_dataset
+from hybridev.core.errors import CalibrationWarning, OutOfDomainWarning
+from hybridev.learning.domain import MISSING_INPUT_SCORE, TrainingDomain, domain_quantities
+
+FAST = dict(n_steps=100, max_epochs=30, calibrate_physics=False)
+
+
+def _table(temps, dist=10.0, speed=40.0, mode="eco"):
+    n = len(temps)
+    return pd.DataFrame({"distance_km": np.full(n, dist), "avg_speed_kmh": np.full(n, speed),
+                         "temperature_c": np.asarray(temps, float), "mode": [mode] * n})
+
+
+def test_gap_inside_the_range_leaves_the_domain():
+    # the paper's design: -5, 20, 32 degC only; 3 degC is 8 degC from any training trip
+    dom = TrainingDomain.fit(_table([-5, 20, 32] * 4), np.zeros((12, 1)))
+    score, ok = dom.score(_table([-5, -3, 3, 14, 21.5, 32, 40]))
+    assert ok.tolist() == [True, True, False, False, True, True, False]
+    assert score[2] == pytest.approx(8 / 3)
+    assert score[-1] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 degC
+    # the score rises as the trip leaves the domain
+    s, _ = dom.score(_table([32, 36, 45, 60]))
+    assert np.all(np.diff(s) > 0)
+
+
+def test_distance_speed_and_duration_ranges():
+    dom = TrainingDomain.fit(_table([20] * 3, dist=10.0), np.zeros((3, 1)))
+    _s, ok = dom.score(pd.concat([_table([20], dist=11.0), _table([20], dist=30.0),
+                                 _table([20], speed=60.0)], ignore_index=True))
+    assert ok.tolist() == [True, False, False]
+
+
+def test_missing_trained_with_mode_counts_as_out_of_domain():
+    dom = TrainingDomain.fit(_table([20] * 5), np.zeros((5, 1)))
+    s, ok = dom.score(_table([20, 20]).assign(mode=["eco", None]))
+    assert ok.tolist() == [True, False] and s[1] == MISSING_INPUT_SCORE
+    unlabelled = TrainingDomain.fit(_table([20] * 5, mode=None), np.zeros((5, 1)))
+    assert unlabelled.score(_table([20], mode=None))[1].all()
+
+
+def test_clip_features_and_persistence_roundtrip():
+    x = np.array([[0.0, -1.0], [1.0, 2.0]])
+    dom = TrainingDomain.fit(_table([1, 2]), x)
+    np.testing.assert_array_equal(dom.clip_features(np.array([[5.0, -9.0]])), [[1.0, -1.0]])
+    back = TrainingDomain.from_arrays(dom.to_arrays())
+    t = _table([0, 1.5, 9])
+    np.testing.assert_array_equal(back.score(t)[0], dom.score(t)[0])
+    with pytest.raises(ValueError, match="missing"):
+        TrainingDomain.from_arrays({})
+
+
+def test_quantities_use_grade_column():
+    q, has = domain_quantities(_table([20]).assign(grade_pct=2.0))
+    assert q[0, 4] == 2.0 and not has[0]
+
+
+@pytest.fixture(scope="module")
+def warm():
+    d = make_dataset(300, truth="structured", seed=3, n_steps=100)
+    train = d[d.temperature_c > 0].head(60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CalibrationWarning)
+        m = HybridModel(**FAST, physics_seed=1).fit(train, seed=0)
+    return m, d
+
+
+def test_model_flags_cold_trips_widens_them_and_warns_once(warm):
+    m, d = warm
+    test = d.drop(columns=["energy_kwh", "soc_final"]).iloc[100:300]
+    with pytest.warns(OutOfDomainWarning, match=r"\d+ of 200 trip") as rec:
+        out = m.predict_interval(test, 0.9)
+    assert sum(issubclass(w.category, OutOfDomainWarning) for w in rec) == 1
+    cold = (test.temperature_c < 0).to_numpy()
+    assert not out.in_domain[cold].any()  # every trip at -5 degC is flagged
+    rel = (out.energy_kwh_hi - out.energy_kwh_lo) / out.energy_kwh_pred
+    assert rel[cold].median() > 1.5 * rel[out.in_domain].median()
+    # the scale-free confidence rises out of the domain
+    assert out.confidence_rel[cold].median() > 1.5 * out.confidence_rel[out.in_domain].median()
+    with pytest.warns(OutOfDomainWarning):
+        p = m.predict(test)
+    assert (p.in_domain == out.in_domain).all()
+
+
+def test_missing_mode_is_marginalised_and_widened(warm):
+    m, d = warm
+    test = d.drop(columns=["energy_kwh", "soc_final"]).iloc[100:160]
+    test = test[test.temperature_c > 0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        known = m.predict_interval(test, 0.9)
+        unknown = m.predict_interval(test.assign(mode=None), 0.9)
+    assert not unknown.in_domain.any()
+    w_k = (known.energy_kwh_hi - known.energy_kwh_lo).median()
+    w_u = (unknown.energy_kwh_hi - unknown.energy_kwh_lo).median()
+    assert w_u > w_k
+
+
+def test_residual_does_not_extrapolate_beyond_training_distances(warm):
+    m, _ = warm
+    x = m._features(m._physics(_table([20, 20], dist=1e3, speed=60.0).assign(soc_initial=1.0)))
+    assert np.all(x <= m.domain_.feature_hi + 1e-6) and np.all(x >= m.domain_.feature_lo - 1e-6)

@@ -1,0 +1,42 @@
+"""Tests of hybridev.learning.splits: whole groups stay together in every split."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev.learning.splits import group_codes, group_holdout, group_kfold
+
+
+def test_codes_from_column_array_and_none():
+    t = pd.DataFrame({"date": ["d1", "d2", "d1", "d3"]})
+    assert group_codes("date", t, 4).tolist() == [0, 1, 0, 2]
+    assert group_codes(np.array([5, 5, 7, 8]), t, 4).tolist() == [0, 0, 1, 2]
+    assert group_codes(None, t, 4).tolist() == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize(("groups", "match"), [
+    ("nope", "not a column"), (["a", "b"], "expected one per trip"),
+    (["a", None, "b", "c"], "missing label")])
+def test_bad_groups(groups, match):
+    with pytest.raises(ValueError, match=match):
+        group_codes(groups, pd.DataFrame({"date": list("abcd")}), 4)
+
+
+def test_holdout_and_folds_keep_groups_whole():
+    rng = np.random.default_rng(0)
+    codes = np.repeat(np.arange(12), rng.integers(1, 6, 12))
+    held = group_holdout(codes, 0.2, rng)
+    for g in np.unique(codes):
+        assert held[codes == g].all() or not held[codes == g].any()
+    assert 0 < held.sum() < len(codes)
+    fold = group_kfold(codes, 5, rng)
+    assert set(fold) == set(range(5))
+    for g in np.unique(codes):
+        assert len(np.unique(fold[codes == g])) == 1
+    sizes = np.bincount(fold)
+    assert sizes.max() - sizes.min() <= 5  # balanced up to one group (sizes 1..5)
+
+
+def test_fewer_groups_than_folds():
+    fold = group_kfold(np.array([0, 0, 1, 1, 1]), 5, np.random.default_rng(0))
+    assert sorted(set(fold)) == [0, 1]
