@@ -353,8 +353,11 @@ def _ood_ratio(model, base: pd.DataFrame, r: np.ndarray, e_med: np.ndarray,
     n, g = r.shape
     if getattr(model, "domain_", None) is None:
         return np.zeros(n * g)
+    # The search grid may run past the trip table's distance limit (the floor's range):
+    # such cells are scored at the limit, far outside any training domain either way.
+    d_max = TRIP_RULES["distance_km"].hi
     rep = base.iloc[np.repeat(np.arange(n), g)].reset_index(drop=True).assign(
-        distance_km=r.ravel(), energy_kwh_physics=e_med.ravel())
+        distance_km=np.minimum(r.ravel(), d_max), energy_kwh_physics=e_med.ravel())
     sd = np.maximum(dist.std(), 1e-12)
     _, ok, sd_ood = model._ood_sd(rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0))
     return np.where(ok, 0.0, sd_ood / sd)

@@ -114,7 +114,9 @@ def test_range_falls_in_the_cold_and_with_aggressiveness(model, speed):
     assert (cold[0, :2] < cold[1, :2]).all()
     modes = predict_range(model, grid(avg_speed_kmh=speed, mode=["eco", "normal", "aggressive"]),
                           soc_initial=0.9, soc_reserve=0.1)[BANDS].to_numpy()
-    assert (np.diff(modes, axis=0) < 0).all()
+    assert (np.diff(modes[:, :2], axis=0) < 0).all()
+    # the widened q90 band may reach the physical floor, which is the same for every mode
+    assert (np.diff(modes[:, 2]) <= 1e-6).all()
 
 
 def test_rows_are_independent_and_seeded(model, conditions):
