@@ -47,6 +47,7 @@ from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.timeseries import as_traces
@@ -485,9 +486,11 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
 
         Parameters
         ----------
-        trips : pandas.DataFrame
+        trips : pandas.DataFrame or dask.dataframe.DataFrame
             A trip table; ``mode`` may be missing or ``None`` and ``hour``
-            missing (see the module docstring).
+            missing (see the module docstring). A dask DataFrame gives a lazy
+            dask DataFrame with the same rows (:mod:`hybridev.fleet.scoring`,
+            needs ``pip install hybridev[dask]``).
         timeseries : LoggedTraces or pandas.DataFrame, optional
             Logged speed traces by ``trip_id`` (see :meth:`fit`).
 
@@ -506,6 +509,8 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         PhysicsFallbackWarning
             When the model is not fitted: ``energy_kwh_pred`` is the physics.
         """
+        if (backend := lazy_backend(trips)) is not None:  # dask: hybridev.fleet.scoring
+            return entry_point(f"{backend}.predict")(self, trips, timeseries=timeseries)
         if not hasattr(self, "net_") and not self._fallback_to_physics:
             self._require_fitted()
         self._check_params()

@@ -58,6 +58,7 @@ from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
+from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
@@ -226,8 +227,9 @@ class ProbabilisticMixin:
 
         Parameters
         ----------
-        trips : pandas.DataFrame
-            Trip table (``mode`` may be missing).
+        trips : pandas.DataFrame or dask.dataframe.DataFrame
+            Trip table (``mode`` may be missing); a dask DataFrame gives a
+            lazy dask DataFrame with the same rows (:mod:`hybridev.fleet.scoring`).
         level : float
             Confidence level in (0, 1), e.g. 0.9 for a 90 % interval.
         seed : int
@@ -264,6 +266,9 @@ class ProbabilisticMixin:
         ...      and (out.energy_kwh_pred <= out.energy_kwh_hi).all())
         True
         """
+        if (backend := lazy_backend(trips)) is not None:  # dask: hybridev.fleet.scoring
+            return entry_point(f"{backend}.predict_interval")(self, trips, level, seed=seed,
+                                                               timeseries=timeseries)
         self._require_probabilistic("predict_interval")
         q = self._conformal_factor(level)
         table, dist = self._distribution(trips, seed=seed, traces=as_traces(timeseries))
