@@ -26,6 +26,7 @@ from hybridev.fleet.partitions import (
     KEY,
     check_dask_frame,
     output_meta,
+    plain_strings,
     row_offsets,
     shipped,
     with_keys,
@@ -39,7 +40,8 @@ def _score(part: pd.DataFrame, model, method: str, kwargs: dict, offsets,
     """The pandas method on one partition (with partition-free trace keys)."""
     part, temp = with_keys(part, offsets, partition_info)
     if isinstance(traces, pd.DataFrame):  # a dask partition of the time series
-        traces = as_traces(traces) if len(traces) else None
+        traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
+                  if len(traces) else None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)  # warned once, up front
         out = getattr(model, method)(part, timeseries=traces, **kwargs)

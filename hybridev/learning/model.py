@@ -89,6 +89,12 @@ VAL_FRACTION = 0.15 / 0.85
 """Default validation share: the paper's 225 validation trips of 1,050 + 225."""
 
 _PREDICT_BLOCK_ROWS = 65_536
+_MIN_BLOCK_ROWS = 32
+"""Smaller blocks are zero-padded to this many rows before the networks: the CPU matrix
+kernels take another summation order for a handful of rows (seen below 13 rows with MKL),
+which changed a trip's prediction in the last float32 bit depending on how many trips
+were scored with it. Padded, a row's prediction does not depend on its batch (checked by
+``tests/fleet/test_scoring.py``: pandas and dask partitions agree)."""
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
 
@@ -368,9 +374,14 @@ class HybridModel(ProbabilisticMixin, BaseEstimator):
         means, variances = [], []
         with torch.inference_mode():  # blocks of rows bound the (M, rows, 64) activations
             for start in range(0, max(len(x), 1), _PREDICT_BLOCK_ROWS):
-                m, v = self.net_(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
-                means.append(m.numpy())
-                variances.append(None if v is None else v.numpy())
+                blk = x[start:start + _PREDICT_BLOCK_ROWS]
+                k = len(blk)
+                if k < _MIN_BLOCK_ROWS:  # see _MIN_BLOCK_ROWS
+                    blk = np.concatenate([blk, np.zeros((_MIN_BLOCK_ROWS - k, blk.shape[1]),
+                                                        np.float32)])
+                m, v = self.net_(torch.from_numpy(blk))
+                means.append(m.numpy()[:, :k])
+                variances.append(None if v is None else v.numpy()[:, :k])
         scale = np.asarray(scale, dtype=float)
         mean = (np.concatenate(means, axis=1).astype(float) * self.target_std_
                 + self.target_mean_) * scale
