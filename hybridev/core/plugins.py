@@ -15,10 +15,12 @@ Every entry point must live in the ``hybridev.fleet`` layer
 
 from __future__ import annotations
 
+import glob
 import importlib
 from collections.abc import Callable
+from pathlib import Path
 
-__all__ = ["ENTRY_POINTS", "entry_point", "lazy_backend"]
+__all__ = ["ENTRY_POINTS", "entry_point", "is_dataset", "lazy_backend"]
 
 ENTRY_POINTS: dict[str, str] = {
     "dask.predict": "hybridev.fleet.scoring:predict_dask",
@@ -74,3 +76,14 @@ def entry_point(name: str) -> Callable:
                              "pip install 'hybridev[dask]'") from exc
         raise
     return getattr(mod, func)
+
+
+def is_dataset(path) -> bool:
+    """Whether ``path`` names a partitioned data set (for dask): a glob pattern or a folder.
+
+    Examples
+    --------
+    >>> is_dataset("trips/*.parquet"), is_dataset("trips.csv")
+    (True, False)
+    """
+    return glob.has_magic(str(path)) or Path(path).is_dir()

@@ -25,7 +25,8 @@ DEFAULT_LEVEL = 0.9
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model directory written by 'hybridev fit'")
-    p.add_argument("trips", help="trip table, .csv or .parquet (mode and hour may be missing)")
+    p.add_argument("trips", help="trip table, .csv or .parquet (mode and hour may be missing); "
+                                 "a glob or folder of them is scored on dask")
     p.add_argument("--out", default="predictions.csv",
                    help="output .csv or .parquet (default predictions.csv)")
     p.add_argument("--level", type=float, default=None,
@@ -36,12 +37,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write point predictions only (no interval columns)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the physics posterior draws (default 0)")
+    # fleet scale (dask): a glob or folder of parquet/CSV files -> a folder of parquet files
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="dask scheduler to run on, for a partitioned data set (a glob such "
+                        "as 'trips/*.parquet' or a folder); default: a local cluster")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes of the local dask cluster (default: all cores)")
+    p.add_argument("--timeseries", default=None,
+                   help="logged time series (trip_id, t_s, speed_kmh, ...) for a partitioned "
+                        "data set: a glob or folder, e.g. partitioned by trip_id")
 
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.core.fileio import read_table, write_table
+    from hybridev.core.plugins import entry_point, is_dataset
     from hybridev.learning.model import HybridModel
 
+    if is_dataset(args.trips):  # a glob or folder: dask (hybridev.fleet.cli.run_predict)
+        return entry_point("cli.predict")(args)
+    for opt in ("scheduler", "workers", "timeseries"):
+        if getattr(args, opt, None) is not None:
+            raise ValueError(f"--{opt} applies to a partitioned data set (a glob such as "
+                             f"'trips/*.parquet' or a folder); got the single file {args.trips!r}")
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
     model = HybridModel.load(args.model)
