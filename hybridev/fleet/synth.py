@@ -8,7 +8,7 @@ For tests and benchmarks of the fleet tools, with a known truth:
   (spreads :data:`SPREAD`: lognormal for the positive quantities, normal
   for efficiency), from ``numpy.random.default_rng([seed, 0])``.
 * **Planted outliers** (``n_outliers`` vehicles, chosen at random): in turn
-  a drag outlier (``C_dA x 1.6``, e.g. a roof box), an auxiliary-load
+  a drag outlier (``C_dA x 2``, e.g. towing a trailer), an auxiliary-load
   outlier (``+2.5 kW``, a heater stuck on) and a degraded battery
   (capacity ``x 0.65``). :func:`hybridev.fleet.calibrate.calibrate_fleet`
   should flag exactly these.
@@ -63,7 +63,7 @@ def _vehicles(n: int, nominal: VehicleParams, rng, outliers: np.ndarray) -> pd.D
         kind = OUTLIER_KINDS[k % len(OUTLIER_KINDS)]
         v.loc[i, "outlier"] = kind
         if kind == "drag":
-            v.loc[i, "drag_area_m2"] *= 1.6
+            v.loc[i, "drag_area_m2"] *= 2.0
         elif kind == "aux":
             v.loc[i, "aux_base_kw"] += 2.5
         else:
