@@ -94,25 +94,38 @@ def _rows(path: Path) -> int:
 
 
 def run_calibrate_by(args) -> int:
-    """``hybridev calibrate MEASURED --by vehicle_id --out FOLDER``: see :mod:`hybridev.fleet.calibrate`."""
+    """``hybridev calibrate MEASURED --by vehicle_id --out FOLDER``.
+
+    See :func:`hybridev.fleet.calibrate.calibrate_fleet`; ``--members`` and
+    ``--max-epochs`` size each vehicle's networks, ``--coastdown`` and
+    ``--capacity-kwh`` give the fleet's nominal vehicle.
+    """
+    from hybridev.cli.commands.calibrate import _vehicle
+    from hybridev.core.fileio import read_table
     from hybridev.fleet.calibrate import calibrate_fleet
     from hybridev.fleet.cluster import cluster_client
 
-    measured = _read(args.measured, "measured").compute() if is_dataset(args.measured) else None
-    if measured is None:
-        from hybridev.core.fileio import read_table
+    vehicle = _vehicle(args)
+    if is_dataset(args.measured):
+        measured = _read(args.measured, "measured").compute()
+    else:
         measured = read_table(args.measured)
-    with cluster_client(getattr(args, "scheduler", None), getattr(args, "workers", None)
-                        ) as client, safe_out_dir(args.out) as tmp:
-        report = calibrate_fleet(measured, by=args.by, client=client, seed=args.seed,
-                                 level=args.level, n_members=args.members,
-                                 max_epochs=args.max_epochs, test_fraction=args.test_fraction,
+    for c, d in measured.dtypes.items():  # dask reads strings as pyarrow strings
+        if str(d).startswith("string"):
+            measured[c] = measured[c].astype(object).where(measured[c].notna(), None)
+    with cluster_client(args.scheduler, args.workers) as client, \
+            safe_out_dir(args.out) as tmp:
+        report = calibrate_fleet(measured, by=args.by, vehicle=vehicle, client=client,
+                                 seed=args.seed, level=args.level, fit_model=True,
+                                 n_members=args.members, max_epochs=args.max_epochs,
+                                 test_fraction=args.test_fraction,
                                  group_column=args.group_column, out_dir=tmp)
         (Path(tmp) / MARKER).write_text(json.dumps(
             {"command": "calibrate", "by": args.by, "measured": str(args.measured),
              "vehicles": len(report)}, indent=1))
-    flagged = report.loc[report["flagged"], args.by].tolist()
-    print(f"calibrated {len(report)} vehicles by {args.by!r}; flagged as apart from the fleet: "
-          f"{flagged if flagged else 'none'}")
+    flagged = report.loc[report["flagged"], args.by].astype(str).tolist()
+    print(f"calibrated {len(report)} vehicles by {args.by!r} in "
+          f"{report.attrs['seconds']:.0f} s; {report.attrs['n_borrowing']} borrowed strength "
+          f"from the fleet prior; flagged: {', '.join(flagged) if flagged else 'none'}")
     print(f"wrote fleet report to {args.out}/fleet_report.html")
     return 0

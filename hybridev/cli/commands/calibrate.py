@@ -35,6 +35,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--capacity-kwh", type=float, default=None,
                    help="battery capacity, kWh (default: the vehicle's)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    # fleet (dask): one posterior and model per vehicle, in parallel, and a fleet report
+    p.add_argument("--by", default=None, metavar="COLUMN",
+                   help="calibrate each vehicle named by this column (e.g. vehicle_id) in "
+                        "parallel on dask and write a fleet report; MEASURED may then be a "
+                        "glob or folder of parquet files")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="with --by: dask scheduler to run on (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with --by: worker processes of the local cluster (default: all cores)")
 
 
 def _vehicle(args: argparse.Namespace):
@@ -55,6 +64,13 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
+    if getattr(args, "by", None) is not None:  # fleet: hybridev.fleet.cli.run_calibrate_by
+        from hybridev.core.plugins import entry_point
+
+        return entry_point("cli.calibrate_by")(args)
+    for opt in ("scheduler", "workers"):
+        if getattr(args, opt, None) is not None:
+            raise ValueError(f"--{opt} applies to fleet calibration only (with --by COLUMN)")
     vehicle = _vehicle(args)
     measured = read_measured_trips(args.measured, args.timeseries, vehicle)
     n_bad = measured.n_rejected
