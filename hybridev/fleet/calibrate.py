@@ -17,7 +17,10 @@ parameter its posterior median and ``_lo``/``_hi`` (central ``level``
 interval); ``consumption_kwh_per_100km`` (+ interval, on the reference trips);
 ``capacity_kwh`` (+ interval); held-out ``physics_mape_pct``,
 ``physics_coverage``, ``hybrid_mape_pct``, ``hybrid_coverage``; ``z_consumption``,
-``z_capacity``, ``flagged``, ``flag_reason``.
+``z_capacity``, ``z_drag_area``, ``z_aux_power``, ``flagged``, ``flag_reason``; for
+vehicles that borrowed strength also ``consumption_kwh_per_100km_own`` (+
+interval), ``physics_mape_pct_own`` and ``physics_coverage_own``: the same
+from their own trips under the default prior, for comparison.
 """
 
 from __future__ import annotations
@@ -34,6 +37,9 @@ from hybridev.fleet.vehicle import calibrate_vehicle
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["calibrate_fleet"]
+
+_OWN = ("consumption_kwh_per_100km", "consumption_kwh_per_100km_lo",
+        "consumption_kwh_per_100km_hi", "physics_mape_pct", "physics_coverage")
 
 
 def _run(tasks: list, client):
@@ -121,7 +127,10 @@ def calibrate_fleet(measured: pd.DataFrame, *, by: str = "vehicle_id",
         centre, prior = fleet_prior(hyper, vehicle)
         again = [calib(groups[k], fit_model=fit_model, prior=prior,
                        **{**common, "vehicle": centre}) for k in small]
-        rows.update(zip(small, _run(again, client), strict=True))
+        for k, r in zip(small, _run(again, client), strict=True):
+            for c in _OWN:  # what the vehicle's own trips alone gave (default prior)
+                r[f"{c}_own"] = rows[k][c]
+            rows[k] = r
     report = pd.DataFrame([{by: k, **{c: v for c, v in r.items() if c != "_post"}}
                            for k, r in rows.items()])
     report = flag_vehicles(report, level)
