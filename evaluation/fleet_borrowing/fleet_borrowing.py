@@ -62,14 +62,13 @@ def main(argv=None) -> int:
     import distributed
 
     from hybridev.fleet.calibrate import calibrate_fleet
+    from hybridev.fleet.cluster import local_cluster
     from hybridev.fleet.synth import make_fleet
 
     veh, trips = make_fleet(a.vehicles, 60, seed=11, n_outliers=0, n_small=a.small,
                             small_trips=a.small_trips)
     t0 = time.perf_counter()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=40) as c, \
-            distributed.Client(c) as client:
+    with local_cluster(2) as c, distributed.Client(c) as client:
         rep = calibrate_fleet(trips, client=client, seed=0, borrow=True)
     secs = time.perf_counter() - t0
     truth = _true_consumption(veh.set_index("vehicle_id").loc[rep.vehicle_id].reset_index(),
@@ -78,8 +77,8 @@ def main(argv=None) -> int:
     res = {}
     for tag, sfx in (("own trips only (default prior)", "_own"), ("fleet prior (borrowing)", "")):
         est = rep[f"consumption_kwh_per_100km{sfx}"].to_numpy()[small]
-        lo = rep[f"consumption_kwh_per_100km{sfx}_lo"].to_numpy()[small]
-        hi = rep[f"consumption_kwh_per_100km{sfx}_hi"].to_numpy()[small]
+        lo = rep[f"consumption_kwh_per_100km_lo{sfx}"].to_numpy()[small]
+        hi = rep[f"consumption_kwh_per_100km_hi{sfx}"].to_numpy()[small]
         err = 100.0 * (est - truth[small]) / truth[small]
         res[tag] = {"mae_pct": float(np.mean(np.abs(err))),
                     "rmse_pct": float(np.sqrt(np.mean(err**2))),

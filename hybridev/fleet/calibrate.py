@@ -18,8 +18,9 @@ interval); ``consumption_kwh_per_100km`` (+ interval, on the reference trips);
 ``capacity_kwh`` (+ interval); held-out ``physics_mape_pct``,
 ``physics_coverage``, ``hybrid_mape_pct``, ``hybrid_coverage``; ``z_consumption``,
 ``z_capacity``, ``z_drag_area``, ``z_aux_power``, ``flagged``, ``flag_reason``; for
-vehicles that borrowed strength also ``consumption_kwh_per_100km_own`` (+
-interval), ``physics_mape_pct_own`` and ``physics_coverage_own``: the same
+vehicles that borrowed strength also ``consumption_kwh_per_100km_own``,
+``consumption_kwh_per_100km_lo_own``, ``..._hi_own``, ``physics_mape_pct_own`` and
+``physics_coverage_own``: the same
 from their own trips under the default prior, for comparison.
 """
 

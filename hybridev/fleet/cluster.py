@@ -5,6 +5,15 @@ connects a :class:`distributed.Client` to a running cluster; without it a
 :class:`distributed.LocalCluster` of ``n_workers`` single-threaded worker
 processes is started (and closed on exit). dask's nannies start workers
 with ``OMP_NUM_THREADS=1`` etc., so each worker uses one core.
+
+One dask default is dropped for the local cluster: ``MALLOC_TRIM_THRESHOLD_=65536``
+(``distributed.nanny.pre-spawn-environ``). Setting it turns off glibc's
+adaptive mmap threshold, so every temporary array above 128 kB of the trace
+synthesis is mapped and faulted in afresh: it tripled a worker's CPU time
+(system time 6 s of 14 s per 100,000 trips; ``benchmarks/bench_fleet.py``).
+Workers of your own scheduler (``--scheduler``) keep whatever environment
+you start them with: start them with ``MALLOC_TRIM_THRESHOLD_`` unset for the
+same speed.
 """
 
 from __future__ import annotations
@@ -15,7 +24,7 @@ import os
 import sys
 from collections.abc import Iterator
 
-__all__ = ["cluster_client", "run_with_progress"]
+__all__ = ["cluster_client", "local_cluster", "run_with_progress"]
 
 
 @contextlib.contextmanager
@@ -49,11 +58,22 @@ def cluster_client(scheduler: str | None = None, n_workers: int | None = None,
             yield client
         return
     n = int(n_workers) if n_workers is not None else (os.cpu_count() or 1)
-    with (distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, memory_limit=memory_limit,
-                                   silence_logs=logging.ERROR) as cluster,
-          distributed.Client(cluster) as client):
+    with local_cluster(n, memory_limit) as cluster, distributed.Client(cluster) as client:
         yield client
+
+
+def local_cluster(n_workers: int, memory_limit: str = "auto"):
+    """``LocalCluster`` of ``n_workers`` single-threaded processes, without dask's
+    ``MALLOC_TRIM_THRESHOLD_`` (see the module docstring)."""
+    import dask
+    import distributed
+
+    env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
+           if k != "MALLOC_TRIM_THRESHOLD_"}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+        return distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1,
+                                        processes=True, dashboard_address=None,
+                                        memory_limit=memory_limit, silence_logs=logging.ERROR)
 
 
 def run_with_progress(client, collection, *, show: bool | None = None):
