@@ -12,8 +12,9 @@ def client():
     """``LocalCluster(processes=True, n_workers=2, threads_per_worker=1)`` and its client."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        cluster = distributed.LocalCluster(processes=True, n_workers=2, threads_per_worker=1,
-                                           dashboard_address=None, memory_limit="1GiB")
+        from hybridev.fleet.cluster import local_cluster
+
+        cluster = local_cluster(2, memory_limit="2GiB")  # processes, 1 thread each
         c = distributed.Client(cluster)
     yield c
     c.close()

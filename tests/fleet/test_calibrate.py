@@ -60,7 +60,7 @@ def test_hyperparameters_are_robust_to_an_outlier():
     var = {"drag_area_m2": np.full(41, 0.02**2)}
     h = fleet_hyperparameters(med, var)["drag_area_m2"]
     assert np.exp(h["mu"]) == pytest.approx(0.55, rel=0.03)
-    assert h["tau"] == pytest.approx(np.sqrt(0.05**2 - 0.02**2), rel=0.35)
+    assert h["tau"] == pytest.approx(np.sqrt(0.05**2 + 0.02**2), rel=0.35)
     veh, prior = fleet_prior({"drag_area_m2": h}, VehicleParams())
     assert veh.drag_coefficient * veh.frontal_area_m2 == pytest.approx(np.exp(h["mu"]))
     assert prior.drag_area_log_sd == h["tau"]
