@@ -22,10 +22,11 @@ def test_lazy_backend_by_type_module():
     assert lazy_backend(dd.from_pandas(pd.DataFrame({"a": [1]}), npartitions=1)) == "dask"
 
 
-def test_import_hybridev_and_pandas_predict_never_import_dask():
+def test_import_hybridev_pandas_predict_and_fleet_import_never_import_dask():
     code = ("import sys, warnings, hybridev\n"
             "warnings.simplefilter('ignore')\n"
             "hybridev.HybridModel(n_steps=100).predict(hybridev.make_trips(3))\n"
+            "import hybridev.fleet\n"
             "print(sorted({k.split('.')[0] for k in sys.modules} & {'dask', 'distributed'}))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
