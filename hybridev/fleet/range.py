@@ -6,7 +6,7 @@ through :mod:`hybridev.core.plugins`. The trace key of a condition is its
 posterior draws depend on ``seed`` only, so each row equals the pandas
 result for the same seed whatever the partitioning, up to floating-point
 summation order in the batched quantile search (relative differences about
-1e-13; ``tests/fleet/test_range.py`` checks 1e-12).
+1e-13; ``tests/fleet/test_fleet_range.py`` checks 1e-12).
 """
 
 from __future__ import annotations
