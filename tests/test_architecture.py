@@ -4,6 +4,13 @@ Layers, bottom to top (a module may import its own layer and the layers below):
 
 ``core`` < ``physics``, ``metrics`` < ``data`` < ``bayes`` < ``learning`` < ``apps`` < ``cli``
 < ``fleet``.
+
+The one way up: ``HybridModel.predict(dask_dataframe)`` (and ``predict_interval``,
+``predict_range``, ``hybridev predict 'trips/*.parquet'``, ``calibrate --by``) reach the
+dask code of ``fleet`` through the named entry points of ``hybridev.core.plugins``
+(``"module:function"`` strings imported on first use, like packaging entry points),
+never by an import statement; ``tests/fleet/test_plugins.py`` checks that they all
+point into ``hybridev.fleet`` and that ``import hybridev`` loads no dask.
 """
 
 import ast

@@ -83,6 +83,7 @@ import pandas as pd
 
 from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.learning.domain import warn_out_of_domain
 from hybridev.learning.features import normalize_modes
 from hybridev.learning.model import HybridModel
@@ -411,7 +412,9 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     model : HybridModel
         Fitted (bands from its predictive distribution) or unfitted (physics
         only, with a :class:`~hybridev.learning.model.PhysicsFallbackWarning`).
-    conditions : pandas.DataFrame, (n_rows, ...)
+    conditions : pandas.DataFrame, (n_rows, ...), or dask.dataframe.DataFrame
+        (a lazy dask DataFrame comes back, :mod:`hybridev.fleet.range`;
+        ``soc_initial`` and ``soc_reserve`` must then be scalars)
         ``avg_speed_kmh`` (km/h), ``temperature_c`` (degC), optional ``mode``
         (may be missing or ``None``), ``hour`` (h), ``grade_pct`` (%) and
         ``trip_id`` (key of the synthesised trace). A ``distance_km`` or
@@ -452,6 +455,10 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     >>> round(float(simulate(trip, n_steps=200).energy_kwh_physics[0]), 2)
     52.5
     """
+    if (backend := lazy_backend(conditions)) is not None:  # dask: hybridev.fleet.range
+        return entry_point(f"{backend}.predict_range")(
+            model, conditions, soc_initial=soc_initial, soc_reserve=soc_reserve,
+            quantiles=quantiles, seed=seed)
     model = _check_model(model)
     check_seed(seed)
     cond = _check_conditions(conditions)

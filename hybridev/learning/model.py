@@ -52,6 +52,7 @@ from sklearn.exceptions import NotFittedError
 
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
+from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.timeseries import as_traces
@@ -109,6 +110,12 @@ conformal (a 15 % split then holds >= 37 calibration trips; CV+ costs ``cv_folds
 extra ensemble trainings and ``cv_folds`` extra network passes per prediction)."""
 
 _PREDICT_BLOCK_ROWS = 65_536
+_MIN_BLOCK_ROWS = 32
+"""Smaller blocks are zero-padded to this many rows before the networks: the CPU matrix
+kernels take another summation order for a handful of rows (seen below 13 rows with MKL),
+which changed a trip's prediction in the last float32 bit depending on how many trips
+were scored with it. Padded, a row's prediction does not depend on its batch (checked by
+``tests/fleet/test_scoring.py``: pandas and dask partitions agree)."""
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
 
@@ -420,9 +427,14 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         means, variances = [], []
         with torch.inference_mode():  # blocks of rows bound the (M, rows, 64) activations
             for start in range(0, max(len(x), 1), _PREDICT_BLOCK_ROWS):
-                m, v = net(torch.from_numpy(x[start:start + _PREDICT_BLOCK_ROWS]))
-                means.append(m.numpy())
-                variances.append(None if v is None else v.numpy())
+                blk = x[start:start + _PREDICT_BLOCK_ROWS]
+                k = len(blk)
+                if k < _MIN_BLOCK_ROWS:  # see _MIN_BLOCK_ROWS
+                    blk = np.concatenate([blk, np.zeros((_MIN_BLOCK_ROWS - k, blk.shape[1]),
+                                                        np.float32)])
+                m, v = net(torch.from_numpy(blk))
+                means.append(m.numpy()[:, :k])
+                variances.append(None if v is None else v.numpy()[:, :k])
         scale = np.asarray(scale, dtype=float)
         mean = (np.concatenate(means, axis=1).astype(float) * self.target_std_
                 + self.target_mean_) * scale
@@ -587,10 +599,12 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
 
         Parameters
         ----------
-        trips : pandas.DataFrame or MeasuredTrips
+        trips : pandas.DataFrame, MeasuredTrips or dask.dataframe.DataFrame
             A trip table; ``mode`` may be missing or ``None`` and ``hour``
             missing (see the module docstring). A
-            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces. A dask
+            DataFrame gives a lazy dask DataFrame with the same rows
+            (:mod:`hybridev.fleet.scoring`, needs ``pip install hybridev[dask]``).
         timeseries : LoggedTraces or pandas.DataFrame, optional
             Logged speed traces by ``trip_id`` (see :meth:`fit`).
 
@@ -616,6 +630,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         OutOfDomainWarning
             Once, with the count, when some trips lie outside the training domain.
         """
+        if (backend := lazy_backend(trips)) is not None:  # dask: hybridev.fleet.scoring
+            return entry_point(f"{backend}.predict")(self, trips, timeseries=timeseries)
         if not hasattr(self, "net_") and not self._fallback_to_physics:
             self._require_fitted()
         self._check_params()

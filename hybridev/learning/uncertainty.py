@@ -68,6 +68,7 @@ from sklearn.exceptions import NotFittedError
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.checks import check_seed
+from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
 from hybridev.learning.cvplus import nets_from_arrays, nets_to_arrays
 from hybridev.learning.domain import TrainingDomain
@@ -274,9 +275,11 @@ class ProbabilisticMixin(OutOfDomainMixin):
 
         Parameters
         ----------
-        trips : pandas.DataFrame or MeasuredTrips
+        trips : pandas.DataFrame, MeasuredTrips or dask.dataframe.DataFrame
             Trip table (``mode`` may be missing); a
-            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
+            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces; a dask
+            DataFrame gives a lazy dask DataFrame with the same rows
+            (:mod:`hybridev.fleet.scoring`).
         level : float
             Confidence level in (0, 1), e.g. 0.9 for a 90 % interval.
         seed : int
@@ -322,6 +325,9 @@ class ProbabilisticMixin(OutOfDomainMixin):
         ...      and (out.energy_kwh_pred <= out.energy_kwh_hi).all())
         True
         """
+        if (backend := lazy_backend(trips)) is not None:  # dask: hybridev.fleet.scoring
+            return entry_point(f"{backend}.predict_interval")(self, trips, level, seed=seed,
+                                                               timeseries=timeseries)
         self._require_probabilistic("predict_interval")
         check_seed(seed)
         q = self._conformal_factor(level)

@@ -39,6 +39,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_input_arguments(p)
     add_vehicle_arguments(p)
+    # fleet (dask): one posterior and model per vehicle, in parallel, and a fleet report
+    p.add_argument("--by", default=None, metavar="COLUMN",
+                   help="calibrate each vehicle named by this column (e.g. vehicle_id) in "
+                        "parallel on dask and write a fleet report; MEASURED may then be a "
+                        "glob or folder of parquet files")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="with --by: dask scheduler to run on (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with --by: worker processes of the local cluster (default: all cores)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +61,13 @@ def run(args: argparse.Namespace) -> int:
     check_seed(args.seed, "--seed")
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
+    if getattr(args, "by", None) is not None:  # fleet: hybridev.fleet.cli.run_calibrate_by
+        from hybridev.core.plugins import entry_point
+
+        return entry_point("cli.calibrate_by")(args)
+    for opt in ("scheduler", "workers"):
+        if getattr(args, opt, None) is not None:
+            raise ValueError(f"--{opt} applies to fleet calibration only (with --by COLUMN)")
     inputs = [args.measured, args.timeseries, getattr(args, "columns_file", None)]
     check_output(args.out, kind="dir", inputs=inputs, legacy=legacy_report)  # before the work
     if args.save_model is not None:

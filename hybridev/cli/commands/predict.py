@@ -33,7 +33,8 @@ DEFAULT_LEVEL = 0.9
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model directory written by 'hybridev fit'")
-    p.add_argument("trips", help="trip table, .csv or .parquet (mode and hour may be missing)")
+    p.add_argument("trips", help="trip table, .csv or .parquet (mode and hour may be missing); "
+                                 "a glob or folder of them is scored on dask")
     p.add_argument("--out", default="predictions.csv",
                    help="output .csv or .parquet (default predictions.csv)")
     p.add_argument("--level", type=float, default=None,
@@ -46,14 +47,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="seed of the physics posterior draws (default 0)")
     add_input_arguments(p)
     add_vehicle_arguments(p)
+    # fleet scale (dask): a glob or folder of parquet/CSV files -> a folder of parquet files;
+    # --timeseries (above) may then be a glob or folder too, e.g. partitioned by trip_id
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="dask scheduler to run on, for a partitioned data set (a glob such "
+                        "as 'trips/*.parquet' or a folder); default: a local cluster")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes of the local dask cluster (default: all cores)")
 
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.cli.inputs import hint_missing_soc
     from hybridev.core.fileio import write_table
     from hybridev.core.outputs import TABLE_SUFFIXES, check_output
+    from hybridev.core.plugins import entry_point, is_dataset
     from hybridev.learning.model import HybridModel
 
+    if is_dataset(args.trips):  # a glob or folder: dask (hybridev.fleet.cli.run_predict)
+        return entry_point("cli.predict")(args)
+    for opt in ("scheduler", "workers"):
+        if getattr(args, opt, None) is not None:
+            raise ValueError(f"--{opt} applies to a partitioned data set (a glob such as "
+                             f"'trips/*.parquet' or a folder); got the single file {args.trips!r}")
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
     check_output(args.out, suffixes=TABLE_SUFFIXES,
@@ -74,6 +89,6 @@ def run(args: argparse.Namespace) -> int:
             what = "predictions"
     except ValueError as exc:
         raise hint_missing_soc(exc) from exc
-    write_table(out, args.out)
+    write_table(out, args.out, option="--out")
     print(f"wrote {len(out)} {what} to {args.out}")
     return 0

@@ -1,0 +1,128 @@
+"""Trip predictions on dask DataFrames: ``predict`` and ``predict_interval``, lazily.
+
+``HybridModel.predict(ddf)`` and ``HybridModel.predict_interval(ddf, level)``
+reach these functions through :mod:`hybridev.core.plugins` when given a
+``dask.dataframe.DataFrame``. Each partition is scored by the pandas method
+(``map_partitions`` with explicit ``meta``, see :mod:`hybridev.fleet.partitions`);
+the model is shipped to the workers once. Per-row results equal the pandas
+method's on the whole table for the same seed, whatever the partitioning.
+
+Logged speed traces (``timeseries``) may be a pandas table or
+:class:`~hybridev.physics.traces.LoggedTraces` (shipped once, each partition
+selects its trips' traces), or a dask DataFrame: then both tables are
+shuffled by ``trip_id`` into the same partitions first, so the output rows
+come in a different order (each keeps its ``trip_id``).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import pandas as pd
+
+from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.data.timeseries import as_traces
+from hybridev.fleet.partitions import (
+    KEY,
+    check_dask_frame,
+    output_meta,
+    plain_strings,
+    row_offsets,
+    shipped,
+    with_keys,
+)
+
+__all__ = ["predict_dask", "predict_interval_dask"]
+
+
+def _score(part: pd.DataFrame, model, method: str, kwargs: dict, offsets,
+           traces=None, partition_info=None) -> pd.DataFrame:
+    """The pandas method on one partition (with partition-free trace keys)."""
+    part, temp = with_keys(part, offsets, partition_info)
+    if isinstance(traces, pd.DataFrame):  # a dask partition of the time series
+        traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
+                  if len(traces) else None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicsFallbackWarning)  # warned once, up front
+        out = getattr(model, method)(part, timeseries=traces, **kwargs)
+    return out.drop(columns=[KEY]) if temp else out
+
+
+def _lazy(model, ddf, method: str, kwargs: dict, timeseries):
+    ddf = check_dask_frame(ddf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicsFallbackWarning)
+        meta = output_meta(lambda t: getattr(model, method)(t, **kwargs), ddf._meta)
+    m = shipped(model)
+    if timeseries is not None and type(timeseries).__module__.split(".")[0] == "dask":
+        ts = check_dask_frame(timeseries, "timeseries")
+        if KEY not in ddf.columns:
+            raise ValueError("trips: a dask time series needs a 'trip_id' column in the trips "
+                             "to match the traces by")
+        n = ddf.npartitions
+        ts = ts.astype({KEY: ddf._meta[KEY].dtype})
+        trips = ddf.shuffle(KEY, npartitions=n)
+        ts = ts.shuffle(KEY, npartitions=n)
+        return trips.map_partitions(_score, m, method, kwargs, None, ts, meta=meta,
+                                    align_dataframes=False)
+    offsets = row_offsets(ddf)
+    tr = None if timeseries is None else shipped(as_traces(timeseries), "traces")
+    return ddf.map_partitions(_score, m, method, kwargs, offsets, tr, meta=meta)
+
+
+def _warn_unfitted(model) -> None:
+    if not hasattr(model, "net_") and model._fallback_to_physics:
+        warnings.warn(f"{type(model).__name__} is not fitted: energy_kwh_pred is the physics "
+                      "prediction only (energy_kwh_physics); fit it on measured trips to add "
+                      "the learned residual", PhysicsFallbackWarning, stacklevel=3)
+
+
+def predict_dask(model, trips, *, timeseries=None):
+    """Lazy :meth:`hybridev.HybridModel.predict` of a dask DataFrame.
+
+    Parameters
+    ----------
+    model : HybridModel
+    trips : dask.dataframe.DataFrame
+        Trip table (columns as for the pandas method).
+    timeseries : LoggedTraces, pandas.DataFrame or dask.dataframe.DataFrame, optional
+        Logged speed traces by ``trip_id``.
+
+    Returns
+    -------
+    dask.dataframe.DataFrame
+        Same columns as the pandas method; call ``.compute()`` or
+        ``.to_parquet()``.
+
+    Examples
+    --------
+    >>> import dask.dataframe as dd, warnings
+    >>> from hybridev import HybridModel, make_trips
+    >>> trips = make_trips(6, seed=0)
+    >>> m = HybridModel(n_steps=100)
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     lazy = m.predict(dd.from_pandas(trips, npartitions=3))
+    ...     same = lazy.compute().energy_kwh_pred.to_numpy() == m.predict(trips).energy_kwh_pred
+    >>> bool(same.all())
+    True
+    """
+    if not hasattr(model, "net_") and not model._fallback_to_physics:
+        model._require_fitted()
+    model._check_params()
+    _warn_unfitted(model)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicsFallbackWarning)
+        return _lazy(model, trips, "predict", {}, timeseries)
+
+
+def predict_interval_dask(model, trips, level: float = 0.9, *, seed: int = 0, timeseries=None):
+    """Lazy :meth:`hybridev.HybridModel.predict_interval` of a dask DataFrame.
+
+    Parameters and returned columns as the pandas method; the result is a
+    dask DataFrame whose rows equal the pandas method's for the same ``seed``.
+    Bad ``level`` or an unfitted model fail at once (not at compute time).
+    """
+    model._require_probabilistic("predict_interval")
+    model._conformal_factor(level)  # checks level now
+    return _lazy(model, trips, "predict_interval", {"level": level, "seed": seed}, timeseries)

@@ -1,0 +1,78 @@
+"""``hybridev predict`` on a partitioned data set and ``hybridev calibrate --by``."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev import make_trips
+from hybridev.cli import main
+from hybridev.fleet.cli import MARKER
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, fitted):
+    d = tmp_path_factory.mktemp("cli")
+    fitted.save(d / "model")
+    (d / "trips").mkdir()
+    trips = make_trips(300, seed=9)
+    for k in range(3):
+        trips.iloc[k * 100:(k + 1) * 100].to_parquet(d / "trips" / f"p{k}.parquet", index=False)
+    return d, trips
+
+
+def test_predict_glob_writes_parquet_folder_equal_to_pandas(files, fitted, client):
+    d, trips = files
+    addr = client.scheduler.address
+    rc = main(["predict", str(d / "model"), str(d / "trips" / "*.parquet"),
+               "--out", str(d / "preds"), "--scheduler", addr, "--seed", "2"])
+    assert rc == 0
+    got = pd.read_parquet(d / "preds").sort_values("trip_id").reset_index(drop=True)
+    ref = fitted.predict_interval(trips, 0.9, seed=2)
+    np.testing.assert_allclose(got.energy_kwh_hi, ref.energy_kwh_hi, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(got.soc_final_lo, ref.soc_final_lo, rtol=1e-12, atol=0)
+    assert json.loads((d / "preds" / MARKER).read_text())["rows"] == 300
+    # a folder input works the same, and our own output folder may be replaced
+    assert main(["predict", str(d / "model"), str(d / "trips"), "--out", str(d / "preds"),
+                 "--scheduler", addr, "--point"]) == 0
+    assert "energy_kwh_hi" not in pd.read_parquet(d / "preds").columns
+
+
+def test_predict_never_overwrites_foreign_output(files, client, capsys):
+    d, _ = files
+    (d / "mine").mkdir()
+    (d / "mine" / "keep.txt").write_text("x")
+    rc = main(["predict", str(d / "model"), str(d / "trips"), "--out", str(d / "mine"),
+               "--scheduler", client.scheduler.address])
+    assert rc == 2
+    assert "not written by hybridev" in capsys.readouterr().err
+    assert (d / "mine" / "keep.txt").read_text() == "x"
+
+
+def test_cluster_options_need_a_data_set(files, capsys):
+    d, trips = files
+    trips.to_csv(d / "one.csv", index=False)
+    assert main(["predict", str(d / "model"), str(d / "one.csv"), "--workers", "2",
+                 "--out", str(d / "o.csv")]) == 2
+    assert "--workers" in capsys.readouterr().err
+    assert main(["predict", str(d / "model"), str(d / "trips"), "--workers", "2",
+                 "--scheduler", "tcp://x:1", "--out", str(d / "o")]) == 2
+    assert main(["predict", str(d / "model"), str(d / "nothing*.parquet"),
+                 "--out", str(d / "o2")]) == 2
+
+
+@pytest.mark.slow
+def test_calibrate_by_vehicle(tmp_path, client, capsys):
+    from hybridev.fleet.synth import make_fleet, write_fleet
+
+    v, t = make_fleet(9, 40, seed=5, n_outliers=3, n_small=1)
+    write_fleet(tmp_path / "fleet", v, t, rows_per_file=100)
+    rc = main(["calibrate", str(tmp_path / "fleet" / "trips"), "--by", "vehicle_id",
+               "--out", str(tmp_path / "rep"), "--scheduler", client.scheduler.address,
+               "--members", "2", "--max-epochs", "10"])
+    assert rc == 0
+    r = pd.read_csv(tmp_path / "rep" / "fleet_report.csv")
+    assert set(r.vehicle_id[r.flagged]) == set(v.vehicle_id[v.outlier != ""])
+    assert r.hybrid_mape_pct.notna().sum() == 8
+    assert "flagged" in capsys.readouterr().out
