@@ -1,6 +1,6 @@
 """The marker of folders written by hybridev (used by :mod:`hybridev.core.outputs`).
 
-``hybridev-manifest.json`` holds ``written_by: "hybridev"``, the ``kind`` of
+``_hybridev-manifest.json`` holds ``written_by: "hybridev"``, the ``kind`` of
 output (``"model_dir"``, ``"dir"``, ``"merge_dir"``), optional fields such as a
 format version, and ``files``: the relative path and SHA-256 of every file
 hybridev wrote into the folder.
@@ -17,7 +17,7 @@ from pathlib import Path
 __all__ = ["MANIFEST_FILE", "foreign_files", "is_hybridev_dir", "list_files", "read_manifest",
            "sha256_file", "write_manifest"]
 
-MANIFEST_FILE = "hybridev-manifest.json"
+MANIFEST_FILE = "_hybridev-manifest.json"
 """Marker of a folder written by hybridev: ``written_by``, ``kind`` and the
 SHA-256 of every file in it (``files``: relative path -> hex digest)."""
 

@@ -315,7 +315,7 @@ def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "d
     >>> with output_dir(d / "m", kind="model_dir") as tmp:
     ...     _ = (tmp / "x.txt").write_text("1")
     >>> sorted(p.name for p in (d / "m").iterdir())
-    ['hybridev-manifest.json', 'x.txt']
+    ['_hybridev-manifest.json', 'x.txt']
     """
     info = {"kind": kind, **(manifest or {})}
     if kind == "merge_dir":

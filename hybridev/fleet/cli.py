@@ -47,8 +47,9 @@ def _read(path: str, what: str):
     try:
         return dd.read_csv(paths) if csv else dd.read_parquet(paths)
     except (OSError, ValueError) as exc:
+        detail = " ".join(str(exc).split())  # one line: dask's messages span several
         raise ValueError(f"{what}={path!r}: could not read as a parquet/CSV data set: "
-                         f"{exc}") from exc
+                         f"{detail}") from exc
 
 
 def run_predict(args) -> int:
@@ -100,12 +101,12 @@ def run_calibrate_by(args) -> int:
     ``--max-epochs`` size each vehicle's networks, ``--coastdown`` and
     ``--capacity-kwh`` give the fleet's nominal vehicle.
     """
-    from hybridev.cli.commands.calibrate import _vehicle
+    from hybridev.cli.inputs import vehicle_from_args
     from hybridev.core.fileio import read_table
     from hybridev.fleet.calibrate import calibrate_fleet
     from hybridev.fleet.cluster import cluster_client
 
-    vehicle = _vehicle(args)
+    vehicle = vehicle_from_args(args)
     if is_dataset(args.measured):
         measured = _read(args.measured, "measured").compute()
     else:

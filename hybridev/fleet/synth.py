@@ -9,7 +9,7 @@ For tests and benchmarks of the fleet tools, with a known truth:
   for efficiency), from ``numpy.random.default_rng([seed, 0])``.
 * **Planted outliers** (``n_outliers`` vehicles, chosen at random): in turn
   a drag outlier (``C_dA x 2``, e.g. towing a trailer), an auxiliary-load
-  outlier (``+2.5 kW``, a heater stuck on) and a degraded battery
+  outlier (``+3 kW``, a resistive heater stuck on; PTC heaters draw 3-6 kW) and a degraded battery
   (capacity ``x 0.65``). :func:`hybridev.fleet.calibrate.calibrate_fleet`
   should flag exactly these.
 * **Trips** per vehicle from :func:`hybridev.make_trips` with the seed
@@ -65,7 +65,7 @@ def _vehicles(n: int, nominal: VehicleParams, rng, outliers: np.ndarray) -> pd.D
         if kind == "drag":
             v.loc[i, "drag_area_m2"] *= 2.0
         elif kind == "aux":
-            v.loc[i, "aux_base_kw"] += 2.5
+            v.loc[i, "aux_base_kw"] += 3.0
         else:
             v.loc[i, "battery_capacity_kwh"] *= 0.65
     return v

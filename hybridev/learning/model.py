@@ -27,8 +27,8 @@ Conventions beyond the paper (documented deviations):
   energy and warns (:class:`PhysicsFallbackWarning`), as the paper's
   "defaults to the validated physics model".
 
-Module size (about 550 lines, over the package's 400-line guide): this is the
-one estimator class. Its pieces with a job of their own already live beside it
+Module size (about 690 lines, over the package's 400-line guide): this is the
+one estimator class, with the hooks of the CV+, domain and dask layers. Its pieces with a job of their own already live beside it
 (persistence in :mod:`hybridev.learning.persist`, the probabilistic methods in
 :mod:`hybridev.learning.uncertainty`, features, networks, conformal); what is
 left is the constructor with its numpydoc parameter list (about 100 lines),

@@ -8,7 +8,7 @@
                             SHA-256 of the array file
     arrays.npz              numpy arrays (network weights, scalers, loss curves);
                             absent when nothing was fitted
-    hybridev-manifest.json  the marker of a folder written by hybridev
+    _hybridev-manifest.json  the marker of a folder written by hybridev
                             (:mod:`hybridev.core.outputs`): ``kind: "model_dir"``,
                             format name and version, and the SHA-256 of every file
 

@@ -56,6 +56,12 @@ posterior spread; ``s_ood`` out of the domain): higher means less sure.
 scale-free, it ranks the relative error rather than the trip size, and rises
 as trips leave the training domain. The conformal factor multiplies all trips
 alike, so it does not change the ranking and is not applied.
+
+Module size (about 440 lines, over the package's 400-line guide): the
+probabilistic methods of the model; the conformal steps, the CV+ folds, the
+domain and the out-of-domain spread already live in their own modules
+(:mod:`~hybridev.learning.conformal`, :mod:`~hybridev.learning.cvplus`,
+:mod:`~hybridev.learning.domain`, :mod:`~hybridev.learning.ood`).
 """
 
 from __future__ import annotations

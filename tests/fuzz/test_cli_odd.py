@@ -216,7 +216,7 @@ def test_demo_keeps_the_users_files(tmp_path):
         run_demo(res, n_trips=120, quick=True, echo=lambda s: None)
     assert (res / "my_notes.txt").read_text() == "keep me"
     assert set(DEMO_OUTPUTS) <= {p.name for p in res.iterdir()}
-    assert not [p for p in res.rglob(".*") if p.name != "hybridev-manifest.json"]
+    assert not [p for p in res.rglob(".*") if p.name != "_hybridev-manifest.json"]
 
 
 def test_demo_refuses_a_users_file_of_its_names_before_the_work(tmp_path):

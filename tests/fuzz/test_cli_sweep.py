@@ -138,7 +138,7 @@ def run_case(pool_dir, work, case, monkeypatch):
     assert "Traceback" not in err, (argv, err)
     assert lost_files(before, after, allowed) == [], (argv, err)
     assert not [p for p in work.rglob(".*")
-                if p.name != "hybridev-manifest.json"], (argv, "temporary file left")
+                if p.name != "_hybridev-manifest.json"], (argv, "temporary file left")
     if rc == 2:
         assert set(after) <= set(before), (argv, "a failed run wrote", set(after) - set(before))
         last = err.strip().splitlines()[-1]  # bad rows may be reported before the error

@@ -256,7 +256,7 @@ def _replace_array(path, key, value):
     (lambda p: (p / DOC_FILE).write_text((p / DOC_FILE).read_text().replace('"max_epochs": 2',
                                                                             '"max_epochs": 3')),
      "model.json' does not match its SHA-256"),
-    (lambda p: (p / MANIFEST_FILE).unlink(), "hybridev-manifest.json' is missing"),
+    (lambda p: (p / MANIFEST_FILE).unlink(), "_hybridev-manifest.json' is missing"),
     (lambda p: _edit_doc(p, format_version=3), "format_version=3"),
     (lambda p: _edit_doc(p, format="sklearn.pickle"), "format='sklearn.pickle'"),
     (lambda p: _edit_doc(p, hybridev_version="1.0.0"), "another major version"),
