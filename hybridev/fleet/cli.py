@@ -54,7 +54,7 @@ def _read(path: str, what: str):
 
 def run_predict(args) -> int:
     """``hybridev predict MODEL DATASET --out FOLDER [--scheduler ADDR | --workers N]``."""
-    from hybridev.cli.commands.predict import DEFAULT_LEVEL
+    from hybridev.cli.commands.predict import score
     from hybridev.fleet.cluster import cluster_client, run_with_progress
     from hybridev.learning.model import HybridModel
 
@@ -67,16 +67,8 @@ def run_predict(args) -> int:
     trips = _read(args.trips, "trips")
     ts = getattr(args, "timeseries", None)
     ts = None if ts is None else _read(ts, "--timeseries")
-    calibrated = getattr(model, "conformal_", None) is not None
     with cluster_client(args.scheduler, args.workers) as client:
-        if args.level is not None or (calibrated and not args.point):
-            level = DEFAULT_LEVEL if args.level is None else args.level
-            lazy = model.predict_interval(trips, level, seed=args.seed, timeseries=ts)
-            what = f"predictions with {level:g} intervals" + (
-                "" if calibrated else " (not conformally calibrated)")
-        else:
-            lazy = model.predict(trips, timeseries=ts)
-            what = "predictions"
+        lazy, what = score(model, trips, args, ts)
         with safe_out_dir(args.out) as tmp:
             write = lazy.to_parquet(str(tmp), write_index=False, compute=False)
             run_with_progress(client, write)

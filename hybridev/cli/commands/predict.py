@@ -77,18 +77,24 @@ def run(args: argparse.Namespace) -> int:
     model = model_with_vehicle(HybridModel.load(args.model), args)
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)
-    calibrated = getattr(model, "conformal_", None) is not None
     try:
-        if args.level is not None or (calibrated and not args.point):
-            level = DEFAULT_LEVEL if args.level is None else args.level
-            out = model.predict_interval(trips, level, seed=args.seed, timeseries=traces)
-            what = f"predictions with {level:g} intervals" + (
-                "" if calibrated else " (not conformally calibrated)")
-        else:
-            out = model.predict(trips, timeseries=traces)
-            what = "predictions"
+        out, what = score(model, trips, args, traces)
     except ValueError as exc:
         raise hint_missing_soc(exc) from exc
     write_table(out, args.out, option="--out")
     print(f"wrote {len(out)} {what} to {args.out}")
     return 0
+
+
+def score(model, trips, args: argparse.Namespace, timeseries=None):
+    """Intervals (``--level``, or by default for a calibrated model) or point predictions.
+
+    Returns the prediction table (pandas or lazy dask, as ``trips``) and a description.
+    """
+    calibrated = getattr(model, "conformal_", None) is not None
+    if args.level is not None or (calibrated and not args.point):
+        level = DEFAULT_LEVEL if args.level is None else args.level
+        out = model.predict_interval(trips, level, seed=args.seed, timeseries=timeseries)
+        return out, f"predictions with {level:g} intervals" + (
+            "" if calibrated else " (not conformally calibrated)")
+    return model.predict(trips, timeseries=timeseries), "predictions"
