@@ -110,7 +110,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
     if len(table) == 0:
         raise ValueError(f"{what} is empty: at least one row is required")
     modes = tuple(PROFILES) if modes is None else modes
-    out = table.copy()
+    out = table  # read only until the converted columns are set, once, below
     bad_any = np.zeros(len(out), dtype=bool)
     reasons: list[pd.DataFrame] = []
 
@@ -131,13 +131,15 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
             "reason": [f"{field}={v!r} outside allowed {allowed}" for v in vals.tolist()]}))
         bad_any |= mask
 
+    conv = {}
     for field, rule in rules.items():
         if field not in out.columns:
             continue
         raw = out[field]
         x = _numeric(raw, field, what)
         report(field, rule.bad_mask(x), raw.to_numpy(dtype=object), rule.describe())
-        out[field] = x
+        conv[field] = x
+    out = table.assign(**conv)  # one copy with every numeric column as float
     if "mode" in out.columns:
         m = out["mode"]
         present = m.notna() & (m.astype(str).str.len() > 0)
