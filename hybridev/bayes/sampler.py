@@ -97,7 +97,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                       missing_mode: str | DrivingProfile = "marginalize",
                       max_steps: int = 20000, trace_steps: int = 1000, trace_seed: int = 0,
                       refine_sign: bool = True, groups="auto",
-                      climate_params: bool | None = None) -> PhysicsPosterior:
+                      climate_params: bool | None = None,
+                      sign_vehicle: VehicleParams | None = None) -> PhysicsPosterior:
     """Sample the posterior of physics parameters given measured trip energies.
 
     Parameters
@@ -137,6 +138,11 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         power and warm-up scales) when not in ``params``. Default: yes for a
         vehicle with the continuous climate model (its climate load is the
         least known part of a new car), no for the paper's band model.
+    sign_vehicle : VehicleParams, optional
+        Split the wheel power by sign at this vehicle's road load instead
+        (no refinement): posteriors sampled with the same ``sign_vehicle``
+        share their statistics (the CV+ folds of :class:`hybridev.HybridModel`
+        use the full posterior's ``reference_vehicle``).
     groups : "auto", str, array_like (n_trips,) or None
         Trips that share a day or session share part of their error (same
         weather, traffic, driver, tyre pressure). With groups the likelihood
@@ -202,7 +208,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         return trip_stats(trips, v, traces=traces, n_steps=trace_steps, seed=trace_seed,
                           missing_mode="marginalize" if want_infer else missing_mode)
 
-    stats = build(veh)
+    stats = build(veh if sign_vehicle is None else sign_vehicle)
     unlabelled = ("mode" not in trips.columns
                   or bool((trips["mode"].isna() | (trips["mode"].astype(str) == "")).any()))
     if infer and unlabelled and not stats.marginalised:
@@ -234,8 +240,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                  *(np.array(pr.noise_rel_bounds) * [1.01, 0.99]))
     start = np.r_[x0, np.log(s0)]
     theta, cov = _map_and_cov(logpost, start, scale)
-    ref = veh
-    if refine_sign and {"drag_area_m2", "rolling_resistance_coef",
+    ref = veh if sign_vehicle is None else sign_vehicle
+    if sign_vehicle is None and refine_sign and {"drag_area_m2", "rolling_resistance_coef",
                         "linear_drag_n_per_mps"} & set(names):
         sign = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps")
         try:

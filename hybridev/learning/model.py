@@ -194,6 +194,12 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     physics_params : tuple of str
         Physics parameters sampled by the calibration (see
         :data:`hybridev.physics.stats.STAT_PARAMS`).
+    discrepancy : bool
+        With a physics posterior, re-weight the physics' energy terms by a
+        Bayesian ridge fitted after the calibration (the model-discrepancy
+        stage of :mod:`hybridev.bayes.discrepancy`; default True). The
+        physics columns and the networks' residuals are then those of the
+        re-weighted physics; the posterior's parameters stay physical.
 
     Attributes
     ----------
@@ -217,6 +223,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         them the residual is held, :mod:`hybridev.learning.physical`).
     posterior_ : PhysicsPosterior or None
         Physics posterior (``calibrate_physics=True``).
+    discrepancy_ : TermDiscrepancy or None
+        Term re-weighting of the physics (``discrepancy=True`` with a posterior).
     conformal_ : NormalizedConformal or None
         Calibration residuals of the conformal step (``conformal_fraction > 0``).
 
@@ -250,7 +258,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
                  missing_mode: str | DrivingProfile = "infer",
                  residual_target: str = "relative",
                  physics_params: tuple[str, ...] = DEFAULT_PARAMS,
-                 conformal: str = "auto", cv_folds: int = 5, mondrian: bool = False) -> None:
+                 conformal: str = "auto", cv_folds: int = 5, mondrian: bool = False,
+                 discrepancy: bool = True) -> None:
         self.vehicle = vehicle
         self.features = features
         self.n_members = n_members
@@ -276,6 +285,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         self.conformal = conformal
         self.cv_folds = cv_folds
         self.mondrian = mondrian
+        self.discrepancy = discrepancy
 
     # -- configuration -------------------------------------------------------------------
     def _vehicle(self) -> VehicleParams:
@@ -329,6 +339,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         _check_range(f"{o}.cv_folds", self.cv_folds, 2, 100, integer=True)
         if not isinstance(self.mondrian, bool | np.bool_):
             raise ValueError(f"{o}.mondrian={self.mondrian!r} must be a bool")
+        if not isinstance(self.discrepancy, bool | np.bool_):
+            raise ValueError(f"{o}.discrepancy={self.discrepancy!r} must be a bool")
         bad = [p for p in self.physics_params if p not in STAT_PARAMS]
         if bad or len(self.physics_params) == 0:
             raise ValueError(f"{o}.physics_params={self.physics_params!r}; allowed: a non-empty "
@@ -523,8 +535,9 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
                              f"group(s) are too few to fit with val_fraction="
                              f"{self.val_fraction!r}, conformal={self.conformal!r} and "
                              f"conformal_fraction={self.conformal_fraction!r}")
-        for attr in ("posterior_", "conformal_", "cv_nets_", "domain_"):
-            setattr(self, attr, None if attr != "cv_nets_" else [])
+        for attr in ("posterior_", "discrepancy_", "conformal_", "cv_nets_", "cv_physics_",
+                     "domain_"):
+            setattr(self, attr, [] if attr.startswith("cv_") else None)
         if self._residual:  # the calibration trips stay out of the physics posterior too
             self._fit_posterior(good.iloc[rest], seed, traces)
         phys = self._physics(good, traces)

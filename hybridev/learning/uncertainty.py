@@ -71,12 +71,18 @@ import pandas as pd
 from scipy.special import ndtri
 from sklearn.exceptions import NotFittedError
 
+from hybridev.bayes.discrepancy import TermDiscrepancy
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.checks import check_seed
 from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
-from hybridev.learning.cvplus import nets_from_arrays, nets_to_arrays
+from hybridev.learning.cvplus import (
+    nets_from_arrays,
+    nets_to_arrays,
+    physics_from_arrays,
+    physics_to_arrays,
+)
 from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.inputs import unpack_trips
 from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
@@ -105,18 +111,17 @@ class ProbabilisticMixin(OutOfDomainMixin):
 
     # -- physics -----------------------------------------------------------------------
     def _posterior_physics(self, trips: pd.DataFrame, n_draws: int, seed: int,
-                           traces=None) -> tuple[pd.DataFrame, np.ndarray]:
+                           traces=None, *, physics=None, stats=None
+                           ) -> tuple[pd.DataFrame, np.ndarray]:
         """Simulate-like table at the posterior median, and (n_draws, n_trips) energies.
 
         ``trips`` must be validated (:meth:`_validated`). The statistics are
-        built once; the median and the draws are one matrix product.
+        built once (or passed as ``stats``, from :meth:`_stats`); the median
+        and the draws are one matrix product. ``physics``: see
+        :meth:`_physics_energies`.
         """
-        post: PhysicsPosterior = self.posterior_
-        stats = post.stats_for(trips, traces)
-        med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
-        draws = (post.sample(n_draws, np.random.default_rng(seed)) if n_draws
-                 else np.empty((0, med.size)))
-        energy = energy_from_stats(stats, post.as_params(np.vstack([med, draws])))
+        stats = self._stats(trips, traces) if stats is None else stats
+        energy = self._physics_energies(stats, n_draws, seed, physics)
         e_med = energy[0]
         e_draws = energy[1:] if n_draws else energy[:1]
         vmax = stats.max_speed_kmh
@@ -126,15 +131,61 @@ class ProbabilisticMixin(OutOfDomainMixin):
         out = with_physics_columns(trips, e_med, vmax, self._vehicle().battery_capacity_kwh)
         return out, e_draws
 
+    def _stats(self, trips: pd.DataFrame, traces=None):
+        """Physics statistics of validated ``trips`` as the posterior builds them.
+
+        CV+ fold posteriors share them: they are sampled with the same sign
+        split (:func:`~hybridev.bayes.sampler.calibrate_physics`'s
+        ``sign_vehicle``), and unlabelled trips take the full posterior's mode
+        weights (a documented shortcut, :mod:`hybridev.learning.cvplus`).
+        """
+        post: PhysicsPosterior = self.posterior_
+        return post.stats_for(trips, traces)
+
+    def _physics_energies(self, stats, n_draws: int, seed: int, physics=None) -> np.ndarray:
+        """Energies ``(1 + n_draws, n_trips)``: posterior median, then draws, kWh.
+
+        ``physics`` is a ``(posterior, discrepancy)`` pair (default: the
+        model's ``posterior_`` and ``discrepancy_``); the discrepancy's term
+        weights (:mod:`hybridev.bayes.discrepancy`) multiply the physics terms,
+        its draws pair with the parameter draws.
+        """
+        post, disc = physics or (self.posterior_, getattr(self, "discrepancy_", None))
+        med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
+        rng = np.random.default_rng(seed)
+        draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
+        weights = None
+        if disc is not None:
+            weights = np.vstack([disc.weights, disc.sample(n_draws, rng)])
+        return energy_from_stats(stats, post.as_params(np.vstack([med, draws])),
+                                 term_weights=weights)
+
+    def _fit_discrepancy(self, post: PhysicsPosterior, measured: pd.DataFrame,
+                         traces=None) -> TermDiscrepancy | None:
+        """The term re-weighting of ``post``'s physics on ``measured`` (None when off)."""
+        if not getattr(self, "discrepancy", False):
+            return None
+        stats = post.stats_for(measured, traces)
+        med = post.as_params(np.median(post.samples, axis=0)[None, :])  # (1, 1) arrays
+        e_p = energy_from_stats(stats, med)[0]
+        scale = self._target_scale(e_p, measured["distance_km"].to_numpy(float))
+        return TermDiscrepancy.fit(stats, med, measured["energy_kwh"].to_numpy(float),
+                                   np.maximum(scale, 1e-9))
+
     def _fit_posterior(self, measured: pd.DataFrame, seed: int, traces=None) -> None:
         if not self.calibrate_physics or not self._residual:
             return
+        self.posterior_, self.discrepancy_ = self._calibrate(measured, seed, traces)
+
+    def _calibrate(self, measured: pd.DataFrame, seed: int, traces=None, *,
+                   sign_vehicle=None, n_steps: int | None = None):
+        """Posterior (thinned to :data:`KEEP_POSTERIOR_DRAWS`) and discrepancy on ``measured``."""
         mode = self.missing_mode
         if isinstance(mode, str) and mode == "infer" and measured["mode"].notna().all():
             mode = "marginalize"  # nothing to infer from: every trip is labelled
         post = calibrate_physics(
             measured, self._vehicle(), params=tuple(self.physics_params), seed=int(seed),
-            missing_mode=mode, timeseries=traces,
+            missing_mode=mode, timeseries=traces, n_steps=n_steps, sign_vehicle=sign_vehicle,
             trace_steps=int(self.n_steps), trace_seed=int(self.physics_seed))
         # Keep at most KEEP_POSTERIOR_DRAWS evenly spaced draws, rounded to float32,
         # so that the saved model stays small and loads to exactly this posterior.
@@ -145,7 +196,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
         post.noise_rel = post.noise_rel[keep].astype(np.float32).astype(float)
         if post.mode_weights is not None:
             post.mode_weights = post.mode_weights[keep].astype(np.float32).astype(float)
-        self.posterior_ = post
+        return post, self._fit_discrepancy(post, measured, traces)
 
     # -- distribution ------------------------------------------------------------------
     def _has_spread(self) -> bool:
@@ -174,34 +225,47 @@ class ProbabilisticMixin(OutOfDomainMixin):
         return table, dists[0]
 
     def _distributions(self, trips: pd.DataFrame, *, seed: int = 0, traces=None,
-                       nets=(None,)) -> tuple[pd.DataFrame, list[EnergyDistribution]]:
+                       nets=(None,), physics=None
+                       ) -> tuple[pd.DataFrame, list[EnergyDistribution]]:
         """Physics table and one raw predictive distribution per ensemble in ``nets``.
 
         ``None`` in ``nets`` is the fitted ensemble ``net_``; the others are CV+
-        fold ensembles. All share the physics draws.
+        fold ensembles. ``physics`` (optional, one per net) gives each its own
+        ``(posterior, discrepancy)`` pair (CV+ folds); ``None`` entries, or no
+        ``physics``, use the model's. The statistics are built once. The
+        returned table is that of the first entry.
         """
         self._require_fitted()
-        if getattr(self, "posterior_", None) is not None:
-            table, draws = self._posterior_physics(self._validated(trips),
-                                                   int(self.n_posterior_draws), seed, traces)
-        else:
-            table = self._physics(trips, traces)
-            draws = table["energy_kwh_physics"].to_numpy(float)[None, :]
-        e_p = table["energy_kwh_physics"].to_numpy(float)
-        held, factor = held_feature_table(self, table)  # learning.physical
-        scale = self._target_scale(e_p, table["distance_km"].to_numpy(float)) * factor
-        feats = self._features(held)
-        if not self._residual:  # PureML: no physics part
-            centred = np.zeros_like(draws)
-        else:
-            centred = draws - draws.mean(axis=0)
-            centred += e_p
-        dists = []
-        for net in nets:
+        physics = [None] * len(nets) if physics is None else list(physics)
+        has_post = getattr(self, "posterior_", None) is not None
+        if has_post:
+            valid = self._validated(trips)
+            stats = self._stats(valid, traces)
+        tables, dists, cache = [], [], {}
+        for net, phys in zip(nets, physics, strict=True):
+            key = id(phys)
+            if key not in cache:  # the physics part of this entry (shared by entries)
+                if has_post:
+                    table, draws = self._posterior_physics(
+                        valid, int(self.n_posterior_draws), seed, physics=phys, stats=stats)
+                else:
+                    table = self._physics(trips, traces)
+                    draws = table["energy_kwh_physics"].to_numpy(float)[None, :]
+                e_p = table["energy_kwh_physics"].to_numpy(float)
+                held, factor = held_feature_table(self, table)  # learning.physical
+                scale = self._target_scale(e_p, table["distance_km"].to_numpy(float)) * factor
+                if not self._residual:  # PureML: no physics part
+                    centred = np.zeros_like(draws)
+                else:
+                    centred = draws - draws.mean(axis=0)
+                    centred += e_p
+                cache[key] = (table, self._features(held), scale, centred)
+            table, feats, scale, centred = cache[key]
             mean, var = self._residual_moments(feats, scale, net=net)
             std = np.zeros_like(mean) if var is None else np.sqrt(var)
+            tables.append(table)
             dists.append(EnergyDistribution(centred, mean, std))
-        return table, dists
+        return tables[0], dists
 
     def _conformal_factor(self, level: float) -> float | None:
         """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""
@@ -339,7 +403,9 @@ class ProbabilisticMixin(OutOfDomainMixin):
         q = self._conformal_factor(level)
         trips, traces = unpack_trips(trips, timeseries)
         cv = self._cv_nets()
-        table, dists = self._distributions(trips, seed=seed, traces=traces, nets=(None, *cv))
+        fold_physics = (getattr(self, "cv_physics_", None) or [None] * len(cv)) if cv else []
+        table, dists = self._distributions(trips, seed=seed, traces=traces, nets=(None, *cv),
+                                           physics=(None, *fold_physics))
         dist = dists[0]
         mu, sd = dist.mean(), dist.std()
         e_p = table["energy_kwh_physics"].to_numpy(float)
@@ -408,6 +474,9 @@ class ProbabilisticMixin(OutOfDomainMixin):
             arrays["posterior_noise_rel"] = d["noise_rel"].astype(np.float32)
             if d["mode_weights"] is not None:
                 arrays["posterior_mode_weights"] = d["mode_weights"].astype(np.float32)
+        disc = getattr(self, "discrepancy_", None)
+        if disc is not None:
+            arrays.update({f"discrepancy.{k}": v for k, v in disc.to_arrays().items()})
         cp = getattr(self, "conformal_", None)
         if cp is not None:
             arrays["conformal_residuals"] = cp.residuals
@@ -418,6 +487,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
             doc["cv_folds"] = len(self.cv_nets_)
             arrays["conformal_fold"] = cp.fold
             arrays.update(nets_to_arrays(self.cv_nets_))
+            arrays.update(physics_to_arrays(getattr(self, "cv_physics_", None) or []))
         dom = getattr(self, "domain_", None)
         if dom is not None:
             arrays.update({f"domain.{k}": v for k, v in dom.to_arrays().items()})
@@ -431,6 +501,10 @@ class ProbabilisticMixin(OutOfDomainMixin):
                 "samples": arrays["posterior_samples"],
                 "noise_rel": arrays["posterior_noise_rel"],
                 "mode_weights": arrays.get("posterior_mode_weights")})
+        if any(k.startswith("discrepancy.") for k in arrays):
+            self.discrepancy_ = TermDiscrepancy.from_arrays(
+                {k[len("discrepancy."):]: v for k, v in arrays.items()
+                 if k.startswith("discrepancy.")})
         if "conformal_residuals" in arrays:
             self.conformal_ = NormalizedConformal(arrays["conformal_residuals"])
         if "mondrian_cut_km" in doc:
@@ -440,6 +514,8 @@ class ProbabilisticMixin(OutOfDomainMixin):
             self.conformal_ = CVPlusConformal(arrays["conformal_residuals"],
                                               arrays["conformal_fold"])
             self.cv_nets_ = nets_from_arrays(self, arrays, int(doc["cv_folds"]))
+            self.cv_physics_ = (physics_from_arrays(self, arrays, int(doc["cv_folds"]))
+                                if getattr(self, "posterior_", None) is not None else [])
         if any(k.startswith("domain.") for k in arrays):
             self.domain_ = TrainingDomain.from_arrays(
                 {k[len("domain."):]: v for k, v in arrays.items() if k.startswith("domain.")})

@@ -58,11 +58,13 @@ import numpy as np
 from hybridev.physics.params import VehicleParams
 
 __all__ = [
+    "N_TERMS",
     "STAT_PARAMS",
     "PhysicsStats",
     "coefficients",
     "energy_from_stats",
     "row_energy",
+    "term_energies",
 ]
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
@@ -220,13 +222,29 @@ def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
             h * p["cooling_scale"], p["drive_loss_kw"])
 
 
-def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
+N_TERMS = 14
+"""Rows of :meth:`PhysicsStats.features` (energy terms of a trip)."""
+
+
+def _check_term_weights(term_weights) -> np.ndarray:
+    w = np.asarray(term_weights, dtype=float)
+    if w.ndim not in (1, 2) or w.shape[-1] != N_TERMS or not np.all(np.isfinite(w)):
+        raise ValueError(f"term_weights of shape {w.shape} must be finite with shape "
+                         f"({N_TERMS},) or (n_draws, {N_TERMS})")
+    return w
+
+
+def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarray:
     """Energy of every row (trip, or trip and mode), shape ``broadcast(params) + (n_rows,)``, kWh.
 
     Same parameters as :func:`energy_from_stats`, without the mixture mean.
     """
     p = _param_values(stats, params)
     coef = coefficients(p)
+    if term_weights is not None:
+        w = _check_term_weights(term_weights)
+        coef = tuple(c * (w[..., k, None] if w.ndim == 2 else w[k])
+                     for k, c in enumerate(coef))
     shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
     if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
@@ -234,7 +252,41 @@ def row_energy(stats: PhysicsStats, params=None) -> np.ndarray:
     return sum(c * f for c, f in zip(coef, stats.features(), strict=True))
 
 
-def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
+def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
+    """Each trip's energy split into the 14 terms of :meth:`PhysicsStats.features`, kWh.
+
+    Parameters
+    ----------
+    stats : PhysicsStats
+    params : VehicleParams or mapping of scalars, optional
+        As :func:`energy_from_stats` (one parameter set).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_trips, 14), kWh
+        Mixture mean over the mode rows of marginalised trips; the rows sum
+        to :func:`energy_from_stats`.
+
+    Examples
+    --------
+    >>> from hybridev import make_trips, trip_stats
+    >>> s = trip_stats(make_trips(3, seed=0))
+    >>> bool(np.allclose(term_energies(s).sum(axis=1), energy_from_stats(s)))
+    True
+    """
+    coef = np.array([float(np.asarray(c).reshape(-1)[0]) if np.size(c) == 1 else np.nan
+                     for c in coefficients(_param_values(stats, params))])
+    if not np.all(np.isfinite(coef)):
+        raise ValueError("term_energies takes one parameter set (scalar values)")
+    t = (coef[:, None] * stats.features()).T
+    if not stats.marginalised:
+        return t
+    w = np.exp(stats.log_weight)[:, None]
+    starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
+    return np.add.reduceat(t * w, starts, axis=0)
+
+
+def energy_from_stats(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarray:
     """Trip battery energy for (arrays of) parameter values, kWh.
 
     Parameters
@@ -248,6 +300,11 @@ def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
         ``P_b``; mass, climate model and air density always come from the
         statistics (``hvac_scale`` and ``warmup_scale`` rescale their climate
         terms).
+    term_weights : array_like, shape (14,) or (n_draws, 14), optional
+        Multipliers of the 14 energy terms of :meth:`PhysicsStats.features`
+        (the model-discrepancy re-weighting of
+        :mod:`hybridev.bayes.discrepancy`); ``(n_draws, 14)`` pairs with
+        ``(n_draws, 1)`` parameter arrays. Default: all 1.
 
     Returns
     -------
@@ -261,7 +318,7 @@ def energy_from_stats(stats: PhysicsStats, params=None) -> np.ndarray:
     >>> energy_from_stats(s, {"drag_area_m2": np.array([[0.5], [0.6]])}).shape
     (2, 5)
     """
-    e = row_energy(stats, params)
+    e = row_energy(stats, params, term_weights)
     if not stats.marginalised:
         return e
     w = np.exp(stats.log_weight)

@@ -389,8 +389,14 @@ def test_default_physics_is_the_posterior_median(prob, small):
     med = {k: v for k, v in m.posterior_.median().items() if k != "noise_rel"}
     exact = simulate_measured(trips, true_params=med, noise_rel=0.0,
                               n_steps=N_STEPS).energy_kwh_true.to_numpy()
-    # exact physics at the median; the sufficient statistics split signs at the MAP (0.2 %)
-    np.testing.assert_allclose(out.energy_kwh_physics, exact, rtol=2e-3)
+    # exact physics at the median, its terms re-weighted by the discrepancy stage; the
+    # sufficient statistics split signs at the MAP (0.2 %)
+    from hybridev.physics.stats import term_energies
+
+    terms = term_energies(m.posterior_.stats_for(m._validated(trips)),
+                          m.posterior_.as_params(np.array([list(med.values())])))
+    reweight = (terms @ m.discrepancy_.weights) / terms.sum(axis=1)
+    np.testing.assert_allclose(out.energy_kwh_physics, exact * reweight, rtol=2e-3)
     nominal = simulate(trips, n_steps=N_STEPS).energy_kwh_physics
     # the truth is 0-17 % above the nominal physics: the calibrated physics is closer
     err_cal = np.abs(out.energy_kwh_physics - small.energy_kwh).mean()
