@@ -199,7 +199,7 @@ def curves(vehicle: VehicleParams = COMPACT, temps=None) -> dict[str, np.ndarray
     """Consumption ratio to 21.5 degC over a temperature grid, per cycle."""
     temps = np.linspace(-25.0, 40.0, 66) if temps is None else np.asarray(temps, float)
     out = {"temperature_c": temps}
-    for kind in ("city", "highway", "combined"):
+    for kind in ("city", "highway", "combined", "wltc"):
         e = energy_per_km(cycle(kind), np.r_[temps, 21.5], vehicle)
         out[kind] = e[:-1] / e[-1]
     hp = dataclasses.replace(vehicle, heater_kind="heat_pump")

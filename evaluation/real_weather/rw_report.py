@@ -62,7 +62,7 @@ def _figures(out: Path, cv: dict, m, extra) -> None:
     fig = Figure(figsize=(7.5, 4.8))
     ax = fig.subplots()
     for k, st in (("city", "-"), ("highway", "--"), ("combined", "-."),
-                  ("combined_heat_pump", ":")):
+                  ("combined_heat_pump", ":"), ("wltc", (0, (5, 1, 1, 1, 1, 1)))):
         ax.plot(c["temperature_c"], c[k], st, label=f"model, {k.replace('_', ' ')}")
     for row in rw_curves.curve_table():
         if row["cycle"].endswith("no_hvac"):
