@@ -71,7 +71,7 @@ def _figures(out: Path, cv: dict, m, extra) -> None:
         p = row["published_ratio"]
         ax.errorbar(x, p, yerr=rw_curves.TOLERANCE * p, fmt="ko", ms=4, capsize=3)
         ax.annotate(row["source"].split(" (")[0] + f" ({row['cycle']})", (x, p), fontsize=6,
-                    xytext=(4, 3), textcoords="offset points")
+                    xytext=(4, -9 if row["cycle"] == "wltc" else 3), textcoords="offset points")
     ax.set_xlabel("ambient temperature (°C)")
     ax.set_ylabel("energy per km / energy per km at the reference")
     ax.set_title("Compact BEV (from_coastdown defaults, PTC heater) vs published points "
