@@ -234,6 +234,7 @@ def main(argv=None) -> int:
                                             for p in cv["posteriors"]],
         "no_prior_fits_by_fold": cv["no_prior"],
         "published_curve": rw_curves.curve_table(),
+        "curve_diagnosis": rw_curves.diagnosis_minus15(),
         "tolerance": rw_curves.TOLERANCE,
     }
     result["runtime_s"] = round(time.perf_counter() - t0, 1)

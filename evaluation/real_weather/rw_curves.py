@@ -15,7 +15,8 @@ import numpy as np
 from hybridev import VehicleParams, trace_energy_kwh
 from hybridev.physics.params import LOGGED_PROFILE
 
-__all__ = ["COMPACT", "PUBLISHED", "TOLERANCE", "curve_table", "cycle", "sensitivity"]
+__all__ = ["BATTERY_HEAT_WHATIF", "COMPACT", "PUBLISHED", "TOLERANCE", "curve_table", "cycle",
+           "diagnosis_minus15", "sensitivity"]
 
 COMPACT = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)
 """An illustrative compact BEV (coast-down A/B/C of the size class, 1,700 kg test mass)."""
@@ -45,6 +46,10 @@ PUBLISHED = [
      "54 % of rated range at -15 degC vs 115 % at 21.5 degC"),
     ("Geotab 2020 (4,200 EVs, 5.2 M trips)", "combined", 10.0, 21.5, 1.15 / 1.00,
      ">= 100 % of rated range from 10 degC, 115 % at 21.5 degC"),
+    ("ADAC / Green NCAP 2024 (cold-soaked BEVs, WLTC)", "wltc", -7.0, 23.0, 1.70,
+     "+70 % energy on average at -7 vs 23 degC (cars: +38 % to +100 %)"),
+    ("Xu et al. 2026 (3 BEVs, dynamometer, WLTC)", "wltc", -25.0, 23.0,
+     0.5 * (1.8865 + 2.4345), "+88.65 % to +143.45 % at -25 vs 23 degC; mid-point"),
 ]
 """Published measured points (see real_weather.md for the references)."""
 
@@ -61,9 +66,11 @@ def cycle(kind: str, minutes: float | None = None) -> np.ndarray:
     City: stop-and-go to 30-55 km/h (about 28 km/h mean, like the UDDS);
     highway: ramps and cruise at 80-110 km/h (about 78 km/h mean, like the
     HWFET); combined (also used for the fleet-average Geotab points): city then
-    highway, 55/45 by time. ``minutes`` repeats
+    highway, 55/45 by time; ``"wltc"``: see :func:`wltc_like`. ``minutes`` repeats
     or cuts the pattern to that duration.
     """
+    if kind == "wltc":
+        return wltc_like()
     city = np.concatenate([_phase(v, a, c, b, s) for v, a, c, b, s in
                            ((35, 8, 30, 6, 15), (50, 12, 45, 9, 20), (30, 7, 20, 6, 10),
                             (55, 14, 60, 10, 25), (40, 10, 35, 8, 18))])
@@ -80,6 +87,33 @@ def cycle(kind: str, minutes: float | None = None) -> np.ndarray:
         minutes = {"city": 23.0, "highway": 13.0}.get(kind, len(base) / 60)
     n = int(minutes * 60) + 1
     return np.resize(base, n) if n > len(base) else base[:n]
+
+
+_WLTC_PHASES = (
+    # (duration s, distance km, micro-trips (peak km/h, accel s, cruise s, brake s, stop s))
+    (589, 3.095, ((30, 8, 20, 6, 25), (50, 12, 40, 9, 30), (25, 6, 10, 5, 20),
+                  (56, 14, 60, 10, 40), (35, 9, 25, 7, 30), (45, 10, 35, 8, 60))),
+    (433, 4.756, ((55, 12, 50, 10, 15), (75, 16, 60, 12, 20), (45, 10, 40, 9, 15),
+                  (65, 14, 50, 11, 20))),
+    (455, 7.162, ((85, 18, 90, 12, 10), (97, 20, 100, 14, 10), (70, 14, 60, 12, 10))),
+    (323, 8.254, ((120, 25, 120, 15, 0), (131, 10, 60, 20, 8))),
+)
+
+
+def wltc_like() -> np.ndarray:
+    """A 1 Hz speed trace (m/s) with the WLTC class-3 phase durations and distances.
+
+    Four phases (low, medium, high, extra high: 589, 433, 455 and 323 s; 3.10, 4.76,
+    7.16 and 8.25 km; UNECE GTR No. 15) built from accelerate-cruise-brake-stop
+    micro-trips scaled to each phase's distance: 1,800 s, 23.3 km, 46.5 km/h mean.
+    Not the official speed table (not in this repository); used for the published
+    points measured on the WLTC.
+    """
+    segs = []
+    for dur, km, trips in _WLTC_PHASES:
+        v = np.resize(np.concatenate([_phase(*t) for t in trips]), dur)
+        segs.append(v * (km * 1000.0 / v.sum()))
+    return np.concatenate(segs)
 
 
 def energy_per_km(v_mps: np.ndarray, temperature_c, vehicle: VehicleParams = COMPACT
@@ -112,11 +146,60 @@ def curve_table(vehicle: VehicleParams = COMPACT) -> list[dict]:
     return rows
 
 
+BATTERY_HEAT_WHATIF = {"battery_warmup_kwh_per_k": 0.1, "battery_heat_below_c": 0.0}
+"""What-if (not a default): the pack is heated at the start of a trip from ambient up to
+0 degC. 0.1 kWh/K is the heat capacity of a ~350 kg compact-BEV pack at ~1 kJ/(kg K)
+(Li-ion cells: 0.8-1.1 J/(g K)); the 0 degC threshold is an assumption (manufacturers
+do not publish it)."""
+
+
+def _mixed(minutes: float) -> np.ndarray:
+    """City then highway, 55/45 by time, over ``minutes`` (the combined cycle's mix)."""
+    n_c, n_h = int(0.55 * minutes * 60), int(0.45 * minutes * 60)
+    return np.concatenate([np.resize(cycle("city"), n_c), np.resize(cycle("highway"), n_h)])
+
+
+def _ratio(v_mps, t, t_ref, vehicle) -> float:
+    e = energy_per_km(v_mps, [t, t_ref], vehicle)
+    return float(e[0] / e[1])
+
+
+def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
+    """Why the Geotab point at -15 degC is missed: what the comparison and candidate
+    physics change.
+
+    Returns the model ratio (-15 vs 21.5 degC, and 10 vs 21.5 degC) for trips of 10 to
+    52 minutes at the combined cycle's city/highway mix and for a city-only trip; the
+    number of published points matched with the battery-heating what-if
+    (:data:`BATTERY_HEAT_WHATIF`) and its Geotab -15 ratio; and the ratio at -15 degC
+    interpolated (log-linear in temperature) between the two WLTC dynamometer points
+    (-7 and -25 degC), with the model's WLTC ratio at -15 degC.
+    """
+    by_len = {m: (_ratio(_mixed(m), -15.0, 21.5, vehicle), _ratio(_mixed(m), 10.0, 21.5, vehicle))
+              for m in (10, 20, 30, 52)}
+    city = _ratio(cycle("city"), -15.0, 21.5, vehicle)
+    bat = dataclasses.replace(vehicle, **BATTERY_HEAT_WHATIF)
+    rows = curve_table(bat)
+    geo = next(r for r in rows if r["temperature_c"] == -15.0)
+    dyno = [r for r in PUBLISHED if r[1] == "wltc"]
+    (t1, _, r1), (t2, _, r2) = ((r[2], r[3], r[4]) for r in dyno)
+    interp = float(np.exp(np.log(r1) + (np.log(r2) - np.log(r1)) * (-15.0 - t1) / (t2 - t1)))
+    return {"by_length": by_len, "city_23min": city,
+            "battery_heating": {"n_matched": sum(r["matched"] for r in rows), "n": len(rows),
+                                "geotab_minus15": geo["model_ratio"],
+                                "failed": [f"{r['source'].split(' (')[0]} {r['cycle']} "
+                                           f"{r['temperature_c']:g} degC "
+                                           f"({r['rel_error'] * 100:+.0f} %)"
+                                           for r in rows if not r["matched"]]},
+            "dyno_interpolated_minus15": interp,
+            "model_wltc_minus15": _ratio(wltc_like(), -15.0, 23.0, vehicle)}
+
+
 def curves(vehicle: VehicleParams = COMPACT, temps=None) -> dict[str, np.ndarray]:
     """Consumption ratio to 21.5 degC over a temperature grid, per cycle."""
     temps = np.linspace(-25.0, 40.0, 66) if temps is None else np.asarray(temps, float)
     out = {"temperature_c": temps}
-    for kind in ("city", "highway", "combined"):
+    for kind in ("city", "highway", "combined", "wltc"):
         e = energy_per_km(cycle(kind), np.r_[temps, 21.5], vehicle)
         out[kind] = e[:-1] / e[-1]
     hp = dataclasses.replace(vehicle, heater_kind="heat_pump")

@@ -147,9 +147,17 @@ class VehicleParams:
         trip duration): ~0.4 kWh at -7 degC, most of a 10-min winter trip's climate energy.
     battery_warmup_kwh_per_k : float
         Energy the battery heater spends per kelvin below ``battery_heat_below_c``
-        at the start of a trip, kWh/K. Default 0: most compact BEVs do not heat
-        the pack while driving unless fast-charging is requested (the cold
-        losses below carry the battery's cold penalty); set it for a car that does.
+        at the start of a trip, kWh/K (a ~350 kg compact-BEV pack at ~1 kJ/(kg K)
+        holds ~0.1 kWh/K). Default 0. Many BEVs heat a cold pack while driving
+        (Geotab 2023 and ADAC/Green NCAP 2024 attribute part of the winter loss
+        to it), but when and how far is manufacturer-specific and unpublished,
+        and a default that heats the pack from 0 degC contradicts the
+        dynamometer data: it would move the ANL Nissan Leaf UDDS ratio at
+        -7 degC to +35 % and the WLTC ratio at -25 degC (Xu et al., Applied
+        Energy 418, 2026) to +23 % of the measured values
+        (``rw_curves.diagnosis_minus15`` in ``evaluation/real_weather``). The
+        cold losses below carry the battery's cold penalty; set it for a car
+        known to heat its pack.
     battery_heat_below_c : float
         Pack temperature threshold of the battery heater, degC.
     cold_traction_loss_per_k : float

@@ -143,3 +143,32 @@ def test_from_coastdown_uses_the_continuous_model_and_stats_stay_exact():
 def test_invalid_climate_fields_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         VehicleParams(**{field: value})
+
+
+@settings(max_examples=150, deadline=None)
+@given(temps, st.floats(0.0, 0.3), st.floats(-20.0, 15.0), st.floats(60.0, 14400.0))
+def test_battery_warmup_is_pack_heat_below_threshold_bounded_by_heater(t, k, thr, dur_s):
+    """The pack term adds ``k (T_thr - T)`` below the threshold, nothing above it, never
+    more than the heater's rating over the trip; default ``k = 0`` adds nothing."""
+    off = dataclasses.replace(CONT, battery_warmup_kwh_per_k=0.0, battery_heat_below_c=thr)
+    on = dataclasses.replace(off, battery_warmup_kwh_per_k=k)
+    extra = float(warmup_energy_kwh(t, dur_s, on) - warmup_energy_kwh(t, dur_s, off))
+    expected = min(k * max(thr - t, 0.0), on.heater_max_kw * dur_s / 3600.0)
+    assert extra == pytest.approx(expected, abs=1e-12)
+    assert extra >= 0.0
+    if t >= thr:
+        assert extra == 0.0
+    assert CONT.battery_warmup_kwh_per_k == 0.0
+
+
+def test_battery_warmup_reaches_the_trip_energy_once_per_trip():
+    """A pack heated from -15 degC to 0 degC at 0.1 kWh/K costs 1.5 kWh per trip, on a
+    20-minute and on a 60-minute trip alike (the heater's 5.5 kW allow it in both); on a
+    10-minute trip the heater's rating caps it at 5.5 kW x 1/6 h."""
+    v = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)
+    bat = dataclasses.replace(v, battery_warmup_kwh_per_k=0.1, battery_heat_below_c=0.0)
+    for minutes, kwh in ((10, 5.5 / 6.0), (20, 1.5), (60, 1.5)):
+        speed = np.full((1, minutes * 60 + 1), 15.0)
+        diff = (trace_energy_kwh(speed, 1.0, vehicle=bat, temperature_c=[-15.0])
+                - trace_energy_kwh(speed, 1.0, vehicle=v, temperature_c=[-15.0]))
+        assert float(diff[0]) == pytest.approx(kwh, rel=1e-9)
