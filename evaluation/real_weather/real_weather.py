@@ -59,9 +59,11 @@ COASTDOWN = {"a_n": 179.4, "b_n_per_kmh": 0.28, "c_n_per_kmh2": 0.0235, "mass_kg
 """The car's coast-down coefficients and test mass: the user's input for this car."""
 
 METHODS = ("nominal_physics", "calibrated_physics", "hybrid", "nnls_stats", "linreg_summary",
-           "median_kwh_per_km", "physics_no_prior")
+           "median_kwh_per_km", "physics_discrepancy", "physics_no_prior")
 """``physics_no_prior`` is a diagnostic, not a model: the calibrated parameters fitted by
-relative least squares without any prior (what the data alone want)."""
+relative least squares without any prior (what the data alone want).
+``physics_discrepancy`` is the hybrid's physics part alone (its ``energy_kwh_physics``:
+the calibrated physics with the discrepancy stage's term weights, no network)."""
 
 FREE = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency", "aux_base_kw",
         "regen_scale", "heating_scale", "cooling_scale", "warmup_scale")
@@ -144,7 +146,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
     keep = np.abs(feats).sum(axis=1) > 0
     xs = _summary_x(trips, extra)
     folds = np.full(len(y), -1)
-    posts, no_prior = [], []
+    posts, no_prior, weights = [], [], []
     for k, (tr, te) in enumerate(GroupKFold(n_splits=N_FOLDS).split(
             xs, groups=trips["date"].to_numpy())):
         folds[te] = k
@@ -156,7 +158,10 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         posts.append(post)
         med = {n: v for n, v in post.median().items() if n != "noise_rel"}
         pred["calibrated_physics"][te] = energy_from_stats(post.stats_for(test, m.traces), med)
-        pred["hybrid"][te] = model.predict(test, timeseries=m.traces)["energy_kwh_pred"]
+        out = model.predict(test, timeseries=m.traces)
+        pred["hybrid"][te] = out["energy_kwh_pred"]
+        pred["physics_discrepancy"][te] = out["energy_kwh_physics"]
+        weights.append(model.discrepancy_.weights.tolist())
         w, _ = nnls(feats[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
         pred["nnls_stats"][te] = feats[keep][:, te].T @ w
         free = _fit_no_prior(stats, y, tr)
@@ -166,7 +171,8 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         pred["linreg_summary"][te] = lr.predict(xs[te])
         kwh_km = np.median(y[tr] / trips["distance_km"].to_numpy(float)[tr])
         pred["median_kwh_per_km"][te] = kwh_km * trips["distance_km"].to_numpy(float)[te]
-    return {"pred": pred, "folds": folds, "posteriors": posts, "y": y, "no_prior": no_prior}
+    return {"pred": pred, "folds": folds, "posteriors": posts, "y": y, "no_prior": no_prior,
+            "term_weights": weights}
 
 
 def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) -> dict:
@@ -233,6 +239,7 @@ def main(argv=None) -> int:
         "posterior_folds_inside_prior_99": [bool(p.prior_check()["inside"].all())
                                             for p in cv["posteriors"]],
         "no_prior_fits_by_fold": cv["no_prior"],
+        "discrepancy_term_weights_by_fold": cv["term_weights"],
         "published_curve": rw_curves.curve_table(),
         "curve_diagnosis": rw_curves.diagnosis_minus15(),
         "tolerance": rw_curves.TOLERANCE,

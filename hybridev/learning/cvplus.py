@@ -13,10 +13,10 @@ so that a held-out trip is scored by a model none of whose parts saw its day.
 Sharing the full posterior made the scores optimistic on small real data sets
 (M1 with 20-40 trips: 90 % coverage about 0.82 on new days): with a handful
 of days the posterior partly fits the held-out day. Fold chains are shorter
-(:data:`FOLD_POSTERIOR_STEPS` steps, about 30 autocorrelation times: enough
-for the median and spread that the scores use; their chain-length warnings are
-silenced) and sampled with the full posterior's sign split, so all folds share
-one set of statistics at prediction time.
+(:data:`FOLD_POSTERIOR_STEPS` steps, about 16 autocorrelation times, some 500
+independent draws: enough for the median and spread that the scores use; their
+chain-length warnings are silenced) and sampled with the full posterior's sign
+split, so all folds share one set of statistics at prediction time.
 
 Documented shortcuts: the fold ensembles share the final model's input and
 target standardisation (means and scales), and unlabelled trips use the full
@@ -25,7 +25,7 @@ posterior's mode weights in every fold.
 Why hand-written: crepes (0.9) and MAPIE offer split and Mondrian conformal
 regressors and MAPIE a CV+ for scikit-learn estimators, but neither takes a
 normalised score from a model with a predictive spread whose folds must keep
-groups together *and* share a physics posterior; the CV+ quantile itself is a
+groups together *and* carry their own physics posterior; the CV+ quantile itself is a
 few lines (:meth:`CVPlusConformal.cv_interval`), checked in the tests against
 crepes' split conformal regressor where the two coincide.
 """
@@ -48,7 +48,7 @@ from hybridev.learning.splits import group_holdout, group_kfold
 __all__ = ["FOLD_POSTERIOR_STEPS", "MIN_GROUPS", "fit_cv_plus", "nets_from_arrays",
            "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
-FOLD_POSTERIOR_STEPS = 1500
+FOLD_POSTERIOR_STEPS = 800
 """emcee steps of each CV+ fold's physics posterior."""
 
 MIN_GROUPS = 5
@@ -142,7 +142,7 @@ def physics_to_arrays(physics) -> dict[str, np.ndarray]:
 
 def physics_from_arrays(model, arrays: dict[str, np.ndarray], n_folds: int) -> list:
     """The folds' physics from :func:`physics_to_arrays` (sharing ``model.posterior_``'s metadata)."""
-    if f"cv0.posterior_samples" not in arrays:
+    if "cv0.posterior_samples" not in arrays:
         return []
     base = model.posterior_.to_dict()
     physics = []

@@ -462,7 +462,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
 
     # -- public API ---------------------------------------------------------------------
     def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
-            timeseries=None, groups=None,
+            timeseries=None, groups="auto",
             progress: Callable[[int], None] | None = None) -> HybridModel:
         """Fit the residual network on measured trips.
 
@@ -477,11 +477,14 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             Logged speed traces by ``trip_id``: the physics of those trips
             (calibration, features, residuals) runs on the real trace. A
             :class:`~hybridev.data.logs.MeasuredTrips` brings its own traces.
-        groups : str or array_like (n_trips,), optional
+        groups : "auto", str, array_like (n_trips,) or None
             Groups of correlated trips (a column name such as ``"date"`` or
             ``"session_group"``, or one label per trip): every split (early
             stopping, split-conformal calibration, CV+ folds) keeps whole
-            groups together (:mod:`hybridev.learning.splits`).
+            groups together (:mod:`hybridev.learning.splits`). ``"auto"``
+            (default): the trips' ``date`` column, else ``session_group``,
+            else none, as the physics calibration does; ``None``: every trip
+            its own group.
         progress : callable, optional
             Called with the number of finished epochs.
 
@@ -511,7 +514,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
         n = len(good)
         codes = group_codes(groups, measured_trips, n)
-        if groups is not None and len(np.unique(codes)) < 2 and n > 1:
+        if groups is not None and not (isinstance(groups, str) and groups == "auto") \
+                and len(np.unique(codes)) < 2 and n > 1:
             warnings.warn(f"groups: all {n} trips are in one group, so no split can keep groups "
                           "apart; every trip is its own group instead (coverage on new groups "
                           "is not assessed)", CalibrationWarning, stacklevel=2)

@@ -14,7 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["group_codes", "group_holdout", "group_kfold"]
+__all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
+
+AUTO_GROUP_COLUMNS = ("date", "session_group")
+"""Columns ``groups="auto"`` looks for, in this order (trips of one day or session
+share weather, traffic and driver, so their errors are correlated)."""
 
 
 def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarray:
@@ -22,9 +26,12 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
 
     Parameters
     ----------
-    groups : None, str or array_like (n_trips,)
+    groups : None, "auto", str or array_like (n_trips,)
         ``None`` (each trip its own group), a column name of ``measured``, or
-        one label per trip (any hashable values).
+        one label per trip (any hashable values). ``"auto"``: the
+        :data:`AUTO_GROUP_COLUMNS` column ``measured`` has first (missing
+        labels a group each; a single group, or no such column, falls back to
+        one trip per group), as :func:`hybridev.calibrate_physics` does.
     measured : pandas.DataFrame or None
         The trip table (for a column name).
     n_trips : int
@@ -38,6 +45,17 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
     """
     if groups is None:
         return np.arange(n_trips)
+    if isinstance(groups, str) and groups == "auto":
+        col = next((c for c in AUTO_GROUP_COLUMNS
+                    if measured is not None and c in measured.columns), None)
+        if col is None:
+            return np.arange(n_trips)
+        g = pd.Series(np.asarray(measured[col].to_numpy(), dtype=object).ravel())
+        if len(g) != n_trips:
+            return np.arange(n_trips)
+        lab = g.astype(str).where(g.notna(), pd.Series([f"\0trip {i}" for i in range(len(g))]))
+        codes = pd.factorize(lab)[0].astype(np.int64)
+        return codes if len(np.unique(codes)) > 1 else np.arange(n_trips)
     if isinstance(groups, str):
         if measured is None or groups not in measured.columns:
             cols = [] if measured is None else list(measured.columns)

@@ -108,3 +108,34 @@ def test_cv_plus_model_coverage_sweep_on_small_fleets():
                 out = m.predict_interval(test.drop(columns=["energy_kwh"]), 0.9)
             cov.append(np.mean((y >= out.energy_kwh_lo) & (y <= out.energy_kwh_hi)))
         assert 0.85 <= np.mean(cov) <= 0.99, (n, cov)
+
+
+def test_each_fold_has_its_own_physics_and_save_load_keeps_it(data, tmp_path):
+    """With a posterior, every CV+ fold samples its own physics on the other folds' trips
+    (posterior and discrepancy), the folds' statistics are shared, and a saved model
+    predicts the same intervals."""
+    d = data.head(40)
+    m = HybridModel(n_steps=100, max_epochs=20, n_posterior_draws=50).fit(d, seed=0, groups="day")
+    assert len(m.cv_physics_) == len(m.cv_nets_) == 5
+    medians = np.array([np.median(p.samples, axis=0) for p, _ in m.cv_physics_])
+    assert not np.allclose(medians, np.median(m.posterior_.samples, axis=0))  # refitted
+    assert all(p.reference_vehicle == m.posterior_.reference_vehicle for p, _ in m.cv_physics_)
+    assert all(disc is not None for _, disc in m.cv_physics_)
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    test = data.iloc[200:230].drop(columns=["energy_kwh"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        a, b = m.predict_interval(test, 0.9), back.predict_interval(test, 0.9)
+    cols = ["energy_kwh_pred", "energy_kwh_lo", "energy_kwh_hi"]
+    np.testing.assert_allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-5)
+
+
+def test_fit_groups_by_date_by_default(data):
+    d = data.head(40).assign(date=lambda t: "2026-01-" + (t["day"] + 10).astype(str))
+    m = HybridModel(**FAST).fit(d, seed=0)  # groups="auto": the date column
+    fold = m.conformal_.fold
+    for g in np.unique(d.date):
+        assert len(np.unique(fold[(d.date == g).to_numpy()])) == 1
+    assert m.fit_info_["n_groups"] == 10
+    assert HybridModel(**FAST).fit(d, seed=0, groups=None).fit_info_["n_groups"] == 40

@@ -40,3 +40,15 @@ def test_holdout_and_folds_keep_groups_whole():
 def test_fewer_groups_than_folds():
     fold = group_kfold(np.array([0, 0, 1, 1, 1]), 5, np.random.default_rng(0))
     assert sorted(set(fold)) == [0, 1]
+
+
+def test_auto_groups_use_date_then_session_and_fall_back_to_trips():
+    import pandas as pd
+
+    from hybridev.learning.splits import group_codes
+
+    t = pd.DataFrame({"date": ["d1", "d1", None, "d2"], "session_group": [1, 2, 3, 4]})
+    assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]  # a missing date: own group
+    assert group_codes("auto", t.drop(columns="date"), 4).tolist() == [0, 1, 2, 3]
+    assert group_codes("auto", pd.DataFrame({"date": ["d"] * 3}), 3).tolist() == [0, 1, 2]
+    assert group_codes("auto", pd.DataFrame({"x": [1, 2]}), 2).tolist() == [0, 1]

@@ -142,6 +142,11 @@ parameter compensates for something the physics does not model. Posterior correl
 {_table(pd.DataFrame(s.get("correlations", [])))}{img["parameters"]}
 <p class="note">Corner plot of the posterior: red lines mark the nominal values, dashed lines the
 5, 50 and 95 % quantiles.</p>{img["corner"]}
+<h2>Model discrepancy (hybrid)</h2>
+{_table(pd.DataFrame(s["hybrid"].get("discrepancy_term_weights") or []))}
+<p class="note">Weights the hybrid's discrepancy stage gives the physics' energy terms (1: the
+calibrated physics unchanged; sd: their posterior standard deviation). A weight far from 1 is
+what the physics misses on this car, taken up here rather than in the physical parameters above.</p>
 <h2>MCMC diagnostics</h2>
 <ul><li>{dg["n_walkers"]} walkers, {dg["n_steps"]} steps, burn-in {dg["burn_in"]}, thin
 {dg["thin"]}, {dg["n_samples"]} samples kept</li>

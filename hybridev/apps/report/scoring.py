@@ -120,6 +120,24 @@ def _parameters(post) -> list[dict]:
     return s.reset_index().to_dict(orient="records")
 
 
+TERM_NAMES = ("rolling", "aerodynamic", "linear drag", "inertia and grade",
+              "regen: rolling", "regen: aerodynamic", "regen: linear drag",
+              "regen: inertia and grade", "auxiliary", "heating", "mode auxiliary",
+              "warm-up", "cooling", "drive loss")
+"""Names of the 14 energy terms of :meth:`hybridev.physics.stats.PhysicsStats.features`."""
+
+
+def _discrepancy(model) -> list[dict] | None:
+    """The hybrid's discrepancy-stage weights per fitted term (None without the stage)."""
+    disc = getattr(model, "discrepancy_", None)
+    if disc is None:
+        return None
+    sd = np.zeros(len(TERM_NAMES))
+    sd[disc.active] = np.sqrt(np.clip(np.diag(disc.cov), 0.0, None))
+    return [{"term": n, "weight": float(w), "sd": float(s)}
+            for n, w, s, a in zip(TERM_NAMES, disc.weights, sd, disc.active, strict=True) if a]
+
+
 def _by_condition(pred: pd.DataFrame) -> dict:
     """Coverage and width per temperature band x trip length, and the scale-free confidence.
 
@@ -237,7 +255,8 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         | {"warnings": result.warnings},
         "hybrid": {"fit_info": model.fit_info_,
                    "n_conformal_calibration": None if cp is None else cp.n_calibration,
-                   "physics_posterior_median": None if hyb_post is None else hyb_post.median()},
+                   "physics_posterior_median": None if hyb_post is None else hyb_post.median(),
+                   "discrepancy_term_weights": _discrepancy(model)},
         "flagged": _flagged(pred),
         "rejected": rej.to_dict(orient="records"),
         "config": result.config,

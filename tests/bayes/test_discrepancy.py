@@ -1,0 +1,67 @@
+"""Tests of the model-discrepancy stage (hybridev.bayes.discrepancy)."""
+
+import numpy as np
+import pytest
+
+from hybridev import make_trips, trip_stats
+from hybridev.bayes.discrepancy import TermDiscrepancy
+from hybridev.physics.stats import N_TERMS, energy_from_stats, term_energies
+
+
+@pytest.fixture(scope="module")
+def stats():
+    return trip_stats(make_trips(300, seed=3), n_steps=200)
+
+
+def test_term_energies_sum_to_the_energy_and_weights_rescale_terms(stats):
+    t = term_energies(stats)
+    assert t.shape == (stats.n_trips, N_TERMS)
+    np.testing.assert_allclose(t.sum(axis=1), energy_from_stats(stats), rtol=1e-12)
+    w = np.linspace(0.5, 1.5, N_TERMS)
+    np.testing.assert_allclose(energy_from_stats(stats, term_weights=w), t @ w, rtol=1e-10)
+    draws = np.vstack([w, np.ones(N_TERMS)])
+    e = energy_from_stats(stats, {"aux_base_kw": np.array([[0.5], [0.5]])}, term_weights=draws)
+    assert e.shape == (2, stats.n_trips)
+    with pytest.raises(ValueError, match="term_weights"):
+        energy_from_stats(stats, term_weights=np.ones(3))
+
+
+def test_recovers_planted_term_weights(stats):
+    """Truth: the auxiliary term x 1.6 and the inertia/grade term x 0.8, 1 % noise.
+    300 trips pin both multipliers to a few per cent (tolerance 0.1)."""
+    t = term_energies(stats)
+    true_w = np.ones(N_TERMS)
+    true_w[8], true_w[3] = 1.6, 0.8
+    rng = np.random.default_rng(0)
+    y = (t @ true_w) * (1 + 0.01 * rng.standard_normal(len(t)))
+    d = TermDiscrepancy.fit(stats, None, y, np.abs(t.sum(axis=1)))
+    assert d.weights[8] == pytest.approx(1.6, abs=0.1)
+    assert d.weights[3] == pytest.approx(0.8, abs=0.1)
+    fitted = energy_from_stats(stats, term_weights=d.weights)
+    assert np.mean(np.abs(fitted / y - 1)) < 0.015
+
+
+def test_exact_physics_keeps_weights_near_one_and_unexcited_terms_at_one(stats):
+    """Noise only (2 %): every fitted multiplier stays within 0.1 of 1; terms that no trip
+    excites (here warm-up and cooling of the paper's band model) are not fitted."""
+    t = term_energies(stats)
+    rng = np.random.default_rng(1)
+    y = t.sum(axis=1) * (1 + 0.02 * rng.standard_normal(len(t)))
+    d = TermDiscrepancy.fit(stats, None, y, np.abs(t.sum(axis=1)))
+    assert np.all(np.abs(d.weights - 1) < 0.1)
+    idle = np.max(np.abs(t), axis=0) == 0
+    assert idle.any() and np.all(d.weights[idle] == 1) and not d.active[idle].any()
+
+
+def test_weights_never_negative_and_draws_roundtrip(stats):
+    t = term_energies(stats)
+    y = t.sum(axis=1) - 3.0 * t[:, 8]  # would need a negative auxiliary weight
+    d = TermDiscrepancy.fit(stats, None, np.maximum(y, 0.01), np.abs(t.sum(axis=1)))
+    assert np.all(d.weights >= 0) and np.all(d.sample(200, 0) >= 0)
+    back = TermDiscrepancy.from_arrays(d.to_arrays())
+    np.testing.assert_array_equal(back.weights, d.weights)
+    np.testing.assert_array_equal(back.sample(5, 1), d.sample(5, 1))
+    with pytest.raises(ValueError, match="missing"):
+        TermDiscrepancy.from_arrays({"weights": d.weights})
+    with pytest.raises(ValueError, match="scale_kwh"):
+        TermDiscrepancy.fit(stats, None, y, np.zeros(len(y)))
