@@ -41,10 +41,12 @@ from hybridev.apps.charging.schedule import ChargingProblem, model_trip_table, p
 from hybridev.core.errors import OutOfDomainWarning
 from hybridev.learning.predictive import EnergyDistribution
 
-__all__ = ["ChargingPlan", "evaluate_charging", "plan_charging",
+__all__ = ["SOC_REFINE_TOL", "ChargingPlan", "evaluate_charging", "plan_charging",
            "plan_charging_from_distribution"]
 
 METHODS = ("quantile", "scenario")
+SOC_REFINE_TOL = 0.01
+"""Departure-SoC change below which :func:`plan_charging` stops re-predicting, fraction."""
 DEFAULT_SAMPLES = {"quantile": 4000, "scenario": 300}
 
 
@@ -253,7 +255,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
                   n_samples: int | None = None, n_eval: int = 20000, level: float = 0.9,
                   risk_neutral: bool = False, compare: bool = True, seed=0,
                   time_limit_s: float = 30.0, margin_se: float = 1.0,
-                  soc_refine: int = 1) -> ChargingPlan:
+                  soc_refine: int = 3) -> ChargingPlan:
     """Risk-aware charging plan for a vehicle described by a fitted model.
 
     Calls ``model.predict_distribution(trips)`` (trips in departure order, see
@@ -264,17 +266,18 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     A trip's energy depends on its departure SoC (internal-resistance loss
     grows as the pack voltage falls), which depends on the plan. When the
     schedule has no ``soc_initial`` column, the first plan uses ``soc_now``
-    for every trip; then, ``soc_refine`` times, the trips are predicted again
-    at the plan's median departure SoC and the plan is made again (a
-    fixed-point step; one is enough in practice, as the energy depends on the
-    SoC only weakly). A schedule with ``soc_initial`` is predicted once, as
-    given.
+    for every trip; then the trips are predicted again at the plan's median
+    departure SoC and the plan is made again, until the plan's departure SoC
+    differs from the one predicted at by at most :data:`SOC_REFINE_TOL` on
+    every trip, or ``soc_refine`` times (a fixed-point iteration; it usually
+    settles after one or two passes, as the energy depends on the SoC only
+    weakly). A schedule with ``soc_initial`` is predicted once, as given.
 
     Parameters
     ----------
     soc_refine : int
-        Re-predictions at the planned departure SoC, >= 0 (0: every trip at
-        ``soc_now``, the behaviour before this option).
+        Most re-predictions at the planned departure SoC, >= 0 (0: every trip
+        at ``soc_now``, the behaviour before this option).
 
     Examples
     --------
@@ -305,7 +308,10 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     if "soc_initial" in problem.trips.columns:
         return out
     for _ in range(n_refine):
-        table = table.assign(soc_initial=out.trips["soc_departure_pred"].to_numpy(float))
+        planned = out.trips["soc_departure_pred"].to_numpy(float)
+        if np.max(np.abs(planned - table["soc_initial"].to_numpy(float))) <= SOC_REFINE_TOL:
+            break  # the plan is consistent with the SoC its energies were predicted at
+        table = table.assign(soc_initial=planned)
         with warnings.catch_warnings():  # the first prediction warned already
             warnings.simplefilter("ignore", OutOfDomainWarning)
             dist = model.predict_distribution(table)
