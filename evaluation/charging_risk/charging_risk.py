@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python evaluation/charging_risk/charging_risk.py [--replicates 8]
+    python evaluation/charging_risk/charging_risk.py [--replicates 10]
 
 A plan's achieved risk against the truth, ``P_truth(SoC < soc_min on some
 arrival | plan)``, depends on the fitted model: one fit's epistemic error is a
@@ -19,10 +19,12 @@ Set-up (every number in the output comes from this script):
 * Truth: the structured truth of :mod:`hybridev.physics.truth`,
   ``E* = E_p (1 + S(x)) max(1 + eta, 0.05)``, i.i.d. ``eta ~ N(0, 0.035^2)``,
   ``E_p`` the physics energy on a synthesised speed trace.
-* Two training designs per replicate ``r``:
+* Two training designs, replicate ``r`` of each (``REPLICATES`` in-domain,
+  ``OOD_REPLICATES`` out-of-domain):
 
   1. **in-domain**: the driver's history, ``HISTORY_WEEKS`` past weeks of
-     :func:`hybridev.apps.demo.example_schedule` (seeds ``1000 + 100 r + w``;
+     :func:`hybridev.apps.demo.example_schedule` (seeds ``1000 + 100 s + w``,
+     ``s = 100 + r``;
      commutes, errands, a weekend trip; daily temperature ~ N(2, 4) degC),
      departure SoC uniform on [0.2, 1.0], energies from the truth with speed
      traces and noise of seed ``100 + r``. The planned weeks come from the
