@@ -14,6 +14,7 @@ import pytest
 
 from hybridev.apps.charging.lp import soc_events
 from hybridev.apps.charging.plan import (
+    SOC_REFINE_TOL,
     evaluate_charging,
     plan_charging,
     plan_charging_from_distribution,
@@ -231,7 +232,7 @@ def test_timestamps_unsorted_rows_and_model_entry_point():
         capacity_kwh = 60.0
 
         def predict_distribution(self, trips):
-            seen["trips"] = trips
+            seen.setdefault("trips", trips)  # the first call (before the SoC refinement)
             return dist_for(trips["distance_km"].to_numpy() / 5.0, noise_cv=0.1)
 
     p = plan_charging(Model(), shuffled, soc_now=0.3, tariff=tar, charger_kw=7.0,
@@ -327,3 +328,78 @@ def test_cli_plan_with_saved_model(tmp_path, capsys):
     assert len(plan_df) == 192
     assert (plan_df.loc[~plan_df["parked"], "charge_kw"] == 0).all()
     assert len(pd.read_csv(trips_out)) == 6
+
+
+class _SocModel:
+    """Energy rises as the departure SoC falls (an I^2 R loss), 10 % noise; records calls."""
+
+    capacity_kwh = 60.0
+
+    def __init__(self):
+        self.calls = []
+
+    def predict_distribution(self, trips):
+        self.calls.append(trips.copy())
+        s0 = trips["soc_initial"].to_numpy(float)
+        e = trips["distance_km"].to_numpy(float) / 5.0 * (1.0 + 0.2 * (1.0 - s0))
+        return dist_for(e, noise_cv=0.1)
+
+
+def test_soc_refine_predicts_again_at_the_planned_departure_soc():
+    sched = schedule(TWO_DAYS, 5.0 * ENERGY)
+    args = dict(soc_now=0.3, tariff=tariff(), charger_kw=7.0, n_samples=S, n_eval=N)
+    model = _SocModel()
+    p = plan_charging(model, sched, **args)
+    assert 2 <= len(model.calls) <= 4
+    assert (model.calls[0]["soc_initial"] == 0.3).all()
+    # the second prediction is at the first plan's median departure SoC, which the
+    # plan raised by charging overnight: not the soc_now of the first call
+    second = model.calls[1]["soc_initial"].to_numpy()
+    assert second.max() > 0.5 and not np.allclose(second, 0.3)
+    # the final plan is the plan for the energies at the last SoC predicted at, and
+    # (fixed point) its own departure SoC is that SoC within the tolerance
+    last = model.calls[-1]
+    direct = plan_charging_from_distribution(
+        _SocModel().predict_distribution(last), 60.0, sched, **args)
+    np.testing.assert_allclose(p.plan["charge_kw"], direct.plan["charge_kw"], atol=1e-9)
+    assert np.abs(p.trips["soc_departure_pred"].to_numpy()
+                  - last["soc_initial"].to_numpy()).max() <= SOC_REFINE_TOL
+    assert p.risk_achieved <= tol(0.05)
+    # at most soc_refine re-predictions
+    m2 = _SocModel()
+    plan_charging(m2, sched, soc_refine=1, **args)
+    assert len(m2.calls) == 2
+    # soc_refine=0: one prediction at soc_now (the earlier behaviour)
+    m0 = _SocModel()
+    p0 = plan_charging(m0, sched, soc_refine=0, **args)
+    assert len(m0.calls) == 1
+    # higher departure SoC, less energy predicted, less charging bought
+    assert p.cost < p0.cost
+    # a schedule with soc_initial is predicted once, as given
+    m1 = _SocModel()
+    plan_charging(m1, sched.assign(soc_initial=0.8), **args)
+    assert len(m1.calls) == 1 and (m1.calls[0]["soc_initial"] == 0.8).all()
+    with pytest.raises(ValueError, match="soc_refine=-1"):
+        plan_charging(_SocModel(), sched, soc_refine=-1, **args)
+
+
+def test_evaluate_charging_on_given_scenarios(base_plan):
+    sched = schedule(TWO_DAYS, 5.0 * ENERGY)
+    args = dict(soc_now=0.3, tariff=tariff())
+    dist = dist_for(ENERGY, shared_cv=0.05, noise_cv=0.1)
+    x = base_plan.plan["charge_kw"].to_numpy()
+    from_dist = evaluate_charging(x, dist, 60.0, sched, n_eval=N, seed=3, **args)
+    scen = dist.sample(N, 7)
+    from_scen = evaluate_charging(x, scen, 60.0, sched, **args)
+    assert from_scen.n_eval == N
+    se = np.hypot(from_dist.risk_achieved_se, from_scen.risk_achieved_se)
+    assert abs(from_scen.risk_achieved - from_dist.risk_achieved) <= 4 * se + 1e-9
+    # scenarios are in the schedule's row order: a reversed schedule, reversed columns
+    rev = evaluate_charging(x, scen[:, ::-1], 60.0, sched.iloc[::-1], **args)
+    assert rev.risk_achieved == from_scen.risk_achieved
+    # every scenario far above the plan's reach: all fail; all tiny: none fails
+    assert evaluate_charging(x, np.full((200, 6), 60.0), 60.0, sched, **args).risk_achieved == 1
+    assert evaluate_charging(x, np.full((200, 6), 0.1), 60.0, sched, **args).risk_achieved == 0
+    for bad in (np.ones((50, 6)), np.ones((200, 5)), np.full((200, 6), np.nan)):
+        with pytest.raises(ValueError, match="energy scenarios of shape"):
+            evaluate_charging(x, bad, 60.0, sched, **args)

@@ -20,6 +20,7 @@ achieved risk, the expected cost and the SoC band are measured on
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -37,12 +38,15 @@ from hybridev.apps.charging.lp import (
     violations,
 )
 from hybridev.apps.charging.schedule import ChargingProblem, model_trip_table, parse_problem
+from hybridev.core.errors import OutOfDomainWarning
 from hybridev.learning.predictive import EnergyDistribution
 
-__all__ = ["ChargingPlan", "evaluate_charging", "plan_charging",
+__all__ = ["SOC_REFINE_TOL", "ChargingPlan", "evaluate_charging", "plan_charging",
            "plan_charging_from_distribution"]
 
 METHODS = ("quantile", "scenario")
+SOC_REFINE_TOL = 0.01
+"""Departure-SoC change below which :func:`plan_charging` stops re-predicting, fraction."""
 DEFAULT_SAMPLES = {"quantile": 4000, "scenario": 300}
 
 
@@ -250,13 +254,30 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
                   soc_max: float = 1.0, risk: float = 0.05, method: str = "quantile",
                   n_samples: int | None = None, n_eval: int = 20000, level: float = 0.9,
                   risk_neutral: bool = False, compare: bool = True, seed=0,
-                  time_limit_s: float = 30.0, margin_se: float = 1.0) -> ChargingPlan:
+                  time_limit_s: float = 30.0, margin_se: float = 1.0,
+                  soc_refine: int = 3) -> ChargingPlan:
     """Risk-aware charging plan for a vehicle described by a fitted model.
 
     Calls ``model.predict_distribution(trips)`` (trips in departure order, see
     :func:`hybridev.apps.charging.schedule.model_trip_table`) and
     ``model.capacity_kwh``; everything else is
     :func:`plan_charging_from_distribution` (same arguments and defaults).
+
+    A trip's energy depends on its departure SoC (internal-resistance loss
+    grows as the pack voltage falls), which depends on the plan. When the
+    schedule has no ``soc_initial`` column, the first plan uses ``soc_now``
+    for every trip; then the trips are predicted again at the plan's median
+    departure SoC and the plan is made again, until the plan's departure SoC
+    differs from the one predicted at by at most :data:`SOC_REFINE_TOL` on
+    every trip, or ``soc_refine`` times (a fixed-point iteration; it usually
+    settles after one or two passes, as the energy depends on the SoC only
+    weakly). A schedule with ``soc_initial`` is predicted once, as given.
+
+    Parameters
+    ----------
+    soc_refine : int
+        Most re-predictions at the planned departure SoC, >= 0 (0: every trip
+        at ``soc_now``, the behaviour before this option).
 
     Examples
     --------
@@ -278,13 +299,27 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     problem = parse_problem(schedule, tariff, soc_now=soc_now, capacity_kwh=capacity,
                             charge_efficiency=charge_efficiency, soc_min=soc_min,
                             soc_max=soc_max, charger_kw=charger_kw, risk=risk)
-    dist = model.predict_distribution(model_trip_table(problem))
-    return _plan(problem, dist, np.arange(problem.n_trips), method=method, n_samples=n_samples,
-                 n_eval=n_eval, level=level, risk_neutral=risk_neutral, compare=compare,
-                 seed=seed, time_limit_s=time_limit_s, margin_se=margin_se)
+    n_refine = _count("soc_refine", soc_refine, 0)
+    table = model_trip_table(problem)
+    kw = dict(method=method, n_samples=n_samples, n_eval=n_eval, level=level,
+              risk_neutral=risk_neutral, compare=compare, seed=seed,
+              time_limit_s=time_limit_s, margin_se=margin_se)
+    out = _plan(problem, model.predict_distribution(table), np.arange(problem.n_trips), **kw)
+    if "soc_initial" in problem.trips.columns:
+        return out
+    for _ in range(n_refine):
+        planned = out.trips["soc_departure_pred"].to_numpy(float)
+        if np.max(np.abs(planned - table["soc_initial"].to_numpy(float))) <= SOC_REFINE_TOL:
+            break  # the plan is consistent with the SoC its energies were predicted at
+        table = table.assign(soc_initial=planned)
+        with warnings.catch_warnings():  # the first prediction warned already
+            warnings.simplefilter("ignore", OutOfDomainWarning)
+            dist = model.predict_distribution(table)
+        out = _plan(problem, dist, np.arange(problem.n_trips), **kw)
+    return out
 
 
-def evaluate_charging(charge_kw, dist: EnergyDistribution, capacity_kwh: float,
+def evaluate_charging(charge_kw, dist, capacity_kwh: float,
                       schedule: pd.DataFrame, *, soc_now: float, tariff: pd.DataFrame,
                       charge_efficiency: float = 0.9, soc_min: float = 0.1,
                       soc_max: float = 1.0, level: float = 0.9, n_eval: int = 20000,
@@ -292,8 +327,12 @@ def evaluate_charging(charge_kw, dist: EnergyDistribution, capacity_kwh: float,
     """Monte Carlo assessment of a given charging plan (e.g. a hand-made one).
 
     ``charge_kw`` has one value per tariff slot (kW, >= 0, 0 when not parked).
-    With the same ``seed`` the evaluation samples are those of
-    :func:`plan_charging_from_distribution`, so plans compare on equal terms.
+    ``dist`` is an :class:`EnergyDistribution` (``n_eval`` joint samples are
+    drawn; with the same ``seed`` they are those of
+    :func:`plan_charging_from_distribution`, so plans compare on equal terms)
+    or an array of joint energy scenarios, shape (n_scenarios >= 100,
+    n_trips), kWh, in the schedule's row order (e.g. from a simulator or a
+    data-generating truth; ``n_eval`` and ``seed`` are then not used).
 
     Examples
     --------
@@ -310,7 +349,15 @@ def evaluate_charging(charge_kw, dist: EnergyDistribution, capacity_kwh: float,
     problem = parse_problem(schedule, tariff, soc_now=soc_now, capacity_kwh=capacity_kwh,
                             charge_efficiency=charge_efficiency, soc_min=soc_min,
                             soc_max=soc_max)
-    _check_dist(dist, problem)
+    if isinstance(dist, EnergyDistribution):
+        _check_dist(dist, problem)
+    else:
+        scen = np.asarray(dist, float)
+        if scen.ndim != 2 or scen.shape[1] != problem.n_trips or len(scen) < 100 or not np.all(
+                np.isfinite(scen)):
+            raise ValueError(f"dist must be an EnergyDistribution or finite energy scenarios of "
+                             f"shape (>= 100, {problem.n_trips}) (one column per trip); got "
+                             f"{type(dist).__name__} of shape {np.shape(dist)}")
     x = np.asarray(charge_kw, float)
     if x.shape != (problem.n_slots,) or not np.all(np.isfinite(x)) or (x < 0).any():
         raise ValueError(f"charge_kw must be {problem.n_slots} finite values >= 0 (one per "
@@ -321,8 +368,13 @@ def evaluate_charging(charge_kw, dist: EnergyDistribution, capacity_kwh: float,
         raise ValueError(f"charge_kw={x[j]!r} in slot {problem.slot_start.iloc[j]} while the "
                          "vehicle is on a trip; allowed 0")
     n_eval = _count("n_eval", n_eval, 100)
-    ev = _samples(dist, n_eval, _streams(seed)[1], problem.order)
+    if isinstance(dist, EnergyDistribution):
+        ev = _samples(dist, n_eval, _streams(seed)[1], problem.order)
+        mean = dist.mean()[problem.order]
+    else:
+        ev = scen[:, problem.order]
+        mean = ev.mean(axis=0)
     y = problem.charge_efficiency * problem.slot_h * np.bincount(
         problem.block, weights=x, minlength=problem.n_trips + 1)[: problem.n_trips]
-    return assess_plan(problem, x, y, ev, dist.mean()[problem.order], level=level, method="given",
+    return assess_plan(problem, x, y, ev, mean, level=level, method="given",
                    status="evaluated", risk=None, gamma=None, cal=None, n_samples=0)

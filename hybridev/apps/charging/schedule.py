@@ -293,8 +293,9 @@ def model_trip_table(problem: ChargingProblem) -> pd.DataFrame:
 
     The schedule's trip columns (and ``trip_id``, ``grade_pct`` if present);
     ``soc_initial`` is filled with ``soc_now`` when the schedule has none (a
-    trip's departure SoC depends on the plan, which is not known yet; the
-    energy's dependence on it is weak); ``hour`` is filled with the hour of
+    trip's departure SoC depends on the plan, which is not known yet;
+    :func:`hybridev.plan_charging` then predicts again at the planned
+    departure SoC, see its ``soc_refine``); ``hour`` is filled with the hour of
     day of the departure when departures are timestamps and the schedule has
     no ``hour`` (with departures in plain hours it is left to the model's
     default).
