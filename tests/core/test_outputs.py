@@ -173,7 +173,8 @@ def test_signal_during_save_leaves_no_temporary_folder(tmp_path, sig):
     proc = subprocess.Popen([sys.executable, "-c", _SAVE_LOOP, str(target), str(ready)],
                             env=env, stderr=subprocess.PIPE)
     try:
-        for _ in range(600):
+        deadline = time.monotonic() + 180.0  # a loaded CI machine may take long to import
+        while time.monotonic() < deadline:
             if ready.exists() or proc.poll() is not None:
                 break
             time.sleep(0.05)
