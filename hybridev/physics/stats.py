@@ -248,7 +248,9 @@ def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarra
     shape = np.broadcast_shapes(*(np.shape(x) for x in coef))
     if not shape or shape[-1] == 1:  # constant over rows: one matrix product (fast path)
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
-        return (c[..., 0, :] if shape else c) @ stats.features()
+        # einsum, not BLAS: each trip's energy is then the same whatever the other rows
+        # (partitions of a dask frame give bit-identical results to one pandas frame)
+        return np.einsum("...k,kr->...r", c[..., 0, :] if shape else c, stats.features())
     return sum(c * f for c, f in zip(coef, stats.features(), strict=True))
 
 
