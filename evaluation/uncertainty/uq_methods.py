@@ -50,7 +50,8 @@ class Bands:
 
     mu (n,): point energy; conf (n,) or None: confidence (predictive sd);
     lo, hi, lo_one (L, n): bounds at :data:`LEVELS`; crps, nll: scores of the
-    (calibrated) predictive distribution, NaN when the method has none.
+    (calibrated) predictive distribution, NaN when the method has none;
+    in_domain (n,) or None: the model's ``in_domain`` flag (HybridModel only).
     """
 
     mu: np.ndarray
@@ -61,6 +62,7 @@ class Bands:
     crps: float = float("nan")
     nll: float = float("nan")
     phys_share: float = float("nan")
+    in_domain: np.ndarray | None = None
 
 
 def _floor(*arrays):
@@ -129,7 +131,7 @@ def model_bands(model, trips: pd.DataFrame, y: np.ndarray, seed: int) -> Bands:
     share = float(np.median(raw.physics_draws_kwh.var(axis=0) / np.maximum(sd, 1e-12) ** 2))
     return Bands(point, np.where(ok, sd, np.maximum(sd, sd_ood)), lo, hi, lo_one,
                  crps=M.crps_mixture(y, means, stds, w), nll=M.gaussian_nll(y, mu, dist.std()),
-                 phys_share=share)
+                 phys_share=share, in_domain=ok)
 
 
 def check_against_predict_interval(model, trips: pd.DataFrame, b: Bands, seed: int,
