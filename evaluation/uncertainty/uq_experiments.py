@@ -163,7 +163,7 @@ def _shift_row(b: U.Bands, test: pd.DataFrame, cap: float) -> dict:
             "cov_s95", "mape", "spearman_abs", "auroc_abs")
     return {k: met[k] for k in keep} | {
         "conf_median_kwh": float(np.median(b.conf)), "ratio_median": float(np.median(ratio)),
-        "ratio": ratio}
+        "ood_share": float(np.mean(~b.in_domain)), "ratio": ratio}
 
 
 def run_shift(truth: str, seed: int, fit: pd.DataFrame, fresh: pd.DataFrame,

@@ -7,11 +7,16 @@ derived from them by :func:`soc_bounds`, the rule of
 ``HybridModel.predict_interval`` (image of the energy interval; one-sided
 ``[0, s0 - min(lo_one, mu) / C]`` when the upper energy bound can empty the
 battery).
-:func:`model_bands` rebuilds the model's intervals from its public predictive
-distribution and conformal scores for all 19 levels at once (one distribution
-per test set instead of 19 ``predict_interval`` calls);
-:func:`check_against_predict_interval` asserts that this equals
-``predict_interval`` at the table levels.
+:func:`model_bands` rebuilds the model's intervals for all 19 levels at once
+(one predictive distribution per test set instead of 19 ``predict_interval``
+calls) from the model's public predictive distribution, its conformal scores
+and the library's own pieces of the interval rule: the physical energy floor
+(:func:`hybridev.learning.physical.energy_floor_kwh`) and the out-of-domain
+spread (:mod:`hybridev.learning.ood`, ``_ood_sd``). Only the arithmetic that
+combines them is repeated here; :func:`check_against_predict_interval`
+asserts that the result equals ``predict_interval`` at the table levels (it
+fails when the library's rule changes). Models calibrated by CV+ or per
+Mondrian bin are refused (the study's fits use split conformal).
 """
 
 from __future__ import annotations
@@ -20,9 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.special import ndtri
 
 from hybridev import metrics as M
 from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.physical import energy_floor_kwh
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 
 __all__ = ["LEVELS", "TABLE_LEVELS", "Bands", "check_against_predict_interval", "evaluate",
@@ -43,7 +50,8 @@ class Bands:
 
     mu (n,): point energy; conf (n,) or None: confidence (predictive sd);
     lo, hi, lo_one (L, n): bounds at :data:`LEVELS`; crps, nll: scores of the
-    (calibrated) predictive distribution, NaN when the method has none.
+    (calibrated) predictive distribution, NaN when the method has none;
+    in_domain (n,) or None: the model's ``in_domain`` flag (HybridModel only).
     """
 
     mu: np.ndarray
@@ -54,10 +62,11 @@ class Bands:
     crps: float = float("nan")
     nll: float = float("nan")
     phys_share: float = float("nan")
+    in_domain: np.ndarray | None = None
 
 
 def _floor(*arrays):
-    return [np.maximum(a, 0.0) for a in arrays]  # as predict_interval: E >= min(E_p, 0) = 0
+    return [np.maximum(a, 0.0) for a in arrays]  # baselines without a physics table: E >= 0
 
 
 def soc_bounds(b: Bands, soc_initial: np.ndarray, capacity_kwh: float):
@@ -70,17 +79,37 @@ def soc_bounds(b: Bands, soc_initial: np.ndarray, capacity_kwh: float):
     return lo, hi
 
 
+_PRED_COLUMNS = ("energy_kwh_pred", "soc_final_pred", "domain_score", "in_domain")
+"""Columns ``predict`` adds to the physics table."""
+
+
 def _raw(dist: EnergyDistribution) -> EnergyDistribution:
     return EnergyDistribution(dist.physics_draws_kwh, dist.residual_mean_kwh,
                               dist.residual_std_kwh)
 
 
 def model_bands(model, trips: pd.DataFrame, y: np.ndarray, seed: int) -> Bands:
-    """Bands of a fitted HybridModel (conformal if it has ``conformal_``)."""
+    """Bands of a fitted HybridModel (conformal if it has ``conformal_``).
+
+    The rule of ``HybridModel.predict_interval`` at every level of :data:`LEVELS`:
+    split-conformal ``mu +- q s`` (or the raw mixture's quantiles without a
+    conformal step) and the conformal one-sided lower bound; bounds made to hold
+    ``mu``; out-of-domain trips widened to ``mu +- z s_ood``; every bound floored at
+    ``max(min(E_p, 0), physical floor)``, the point prediction too; the one-sided
+    bound capped at the point prediction.
+    """
     cp = getattr(model, "conformal_", None)
+    if model._cv_nets() or getattr(model, "mondrian", False):
+        raise ValueError("model_bands reproduces split-conformal intervals only; this model "
+                         "uses CV+ or Mondrian calibration (fit on >= 250 trips, "
+                         "conformal='split', mondrian=False)")
     dist = model.predict_distribution(trips, level=DIST_LEVEL, seed=seed)
     raw = _raw(dist)
     mu, sd = raw.mean(), raw.std()
+    table = model.predict(trips)  # the physics table (posterior-median physics)
+    e_p = table["energy_kwh_physics"].to_numpy(float)
+    floor = np.minimum(e_p, 0.0) if model._residual else np.zeros_like(e_p)
+    floor = np.maximum(floor, energy_floor_kwh(table, model._vehicle()))
     if cp is None:
         q = raw.quantile(np.r_[(1 - LEVELS) / 2, (1 + LEVELS) / 2, 1 - LEVELS])
         lo, hi, lo_one = np.split(q, 3)
@@ -88,11 +117,21 @@ def model_bands(model, trips: pd.DataFrame, y: np.ndarray, seed: int) -> Bands:
         qs = np.array([cp.quantile(lv) for lv in LEVELS])[:, None]
         lo, hi = mu - qs * sd, mu + qs * sd
         lo_one = np.stack([cp.lower_bound(mu, sd, lv) for lv in LEVELS])
+    point = np.maximum(mu, floor)
+    lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)
+    _, ok, sd_ood = model._ood_sd(table[[c for c in table.columns if c not in _PRED_COLUMNS]],
+                                  mu, sd, raw.physics_draws_kwh.var(axis=0))
+    z2, z1 = ndtri(0.5 + LEVELS / 2.0)[:, None], ndtri(LEVELS)[:, None]
+    lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
+    hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))
+    lo_one = np.where(ok, lo_one, np.minimum(lo_one, mu - z1 * sd_ood))
+    lo, hi, lo_one = (np.maximum(a, floor) for a in (lo, hi, lo_one))
+    lo_one = np.minimum(lo_one, point)
     means, stds, w = dist.components()  # spread factor of DIST_LEVEL when conformal
     share = float(np.median(raw.physics_draws_kwh.var(axis=0) / np.maximum(sd, 1e-12) ** 2))
-    return Bands(np.maximum(mu, 0.0), sd, *_floor(lo, hi, lo_one),
+    return Bands(point, np.where(ok, sd, np.maximum(sd, sd_ood)), lo, hi, lo_one,
                  crps=M.crps_mixture(y, means, stds, w), nll=M.gaussian_nll(y, mu, dist.std()),
-                 phys_share=share)
+                 phys_share=share, in_domain=ok)
 
 
 def check_against_predict_interval(model, trips: pd.DataFrame, b: Bands, seed: int,

@@ -219,7 +219,8 @@ def shift_table(shift: list) -> str:
                      pm(r[("cov_s50", "mean")], r[("cov_s50", "std")], 100),
                      pm(r[("mape", "mean")], r[("mape", "std")], 1, 2),
                      pm(r[("conf_median_kwh", "mean")], r[("conf_median_kwh", "std")], 1, 3),
-                     pm(r[("ratio_median", "mean")], r[("ratio_median", "std")], 100, 2)])
+                     pm(r[("ratio_median", "mean")], r[("ratio_median", "std")], 100, 2),
+                     pm(r[("ood_share", "mean")], r[("ood_share", "std")], 100)])
     n = pd.DataFrame(shift).seed.nunique()
     return "\n".join([
         "# Distribution shift: coverage and confidence in range vs shifted", "",
@@ -227,9 +228,12 @@ def shift_table(shift: list) -> str:
         "HybridModel() defaults fitted on the fit trips inside the range only; "
         "`all-conditions`: the combined model of the main experiment (fitted on all "
         f"conditions) on the same test trips. Fresh test trips; mean ± sd over {n} seeds. "
-        "ratio = confidence / predicted energy (median over trips).", "",
+        "ratio = confidence / predicted energy (median over trips); out of domain = share "
+        "of the test trips the model flags `in_domain=False` (their intervals are widened, "
+        "`hybridev.learning.ood`).", "",
         md(["truth", "shift", "model", "test range", "n train", "n test", "cov E90 %",
-            "cov SoC90 %", "cov SoC50 %", "MAPE %", "median conf, kWh", "median ratio, %"],
+            "cov SoC90 %", "cov SoC50 %", "MAPE %", "median conf, kWh", "median ratio, %",
+            "out of domain %"],
            rows), ""])
 
 

@@ -180,9 +180,9 @@ class TrainingDomain:
         """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
         n = len(table)
         miss = np.zeros(n, dtype=bool)
-        if self.needs_mode:
-            mode = table["mode"] if "mode" in table.columns else pd.Series([None] * n)
-            miss |= mode.isna().to_numpy()
+        if self.needs_mode:  # on the cells: Series operations are slow on a single trip
+            miss |= (pd.isna(table["mode"].to_numpy(dtype=object)) if "mode" in table.columns
+                     else np.ones(n, dtype=bool))
         if self.needs_trace:
             miss |= ~domain_quantities(table, traces)[1]
         return miss

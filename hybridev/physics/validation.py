@@ -59,8 +59,14 @@ TRIP_RULES: dict[str, FieldRule] = {
 }
 
 
+_NO_REJECTED = pd.DataFrame(columns=["row", "field", "value", "reason"])
+"""Template of the (empty) rejected-rows table; :func:`check_table` returns copies."""
+
+
 def _numeric(col: pd.Series, field: str = "column", what: str = "trips") -> np.ndarray:
     """Numbers of a column; a bool, date or complex column is refused, bool cells are NaN."""
+    if col.dtype == np.float64:  # already numbers: no conversion (to_numeric is a no-op)
+        return col.to_numpy()
     kind = col.dtype.kind
     if kind in "bcmM" or str(col.dtype) == "boolean":
         raise ValueError(f"{what}: column {field!r} has dtype {col.dtype}; numbers are "
@@ -119,6 +125,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
         new = mask & ~bad_any
         if not new.any():
             return
+        values = values()  # the raw cells, only built when some row fails
         if on_error == "raise":
             i = int(np.flatnonzero(mask)[0])
             raise ValueError(
@@ -137,17 +144,26 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
             continue
         raw = out[field]
         x = _numeric(raw, field, what)
-        report(field, rule.bad_mask(x), raw.to_numpy(dtype=object), rule.describe())
-        conv[field] = x
-    out = table.assign(**conv)  # one copy with every numeric column as float
+        report(field, rule.bad_mask(x), lambda raw=raw: raw.to_numpy(dtype=object),
+               rule.describe())
+        if raw.dtype != np.float64:  # float64 columns are kept as they are
+            conv[field] = x
+    # One (lazy, copy-on-write) copy with every numeric column as float: column
+    # replacements are slow on small tables, so only the converted ones are set.
+    out = table.assign(**conv) if conv else table.copy(deep=False)
     if "mode" in out.columns:
         m = out["mode"]
-        present = m.notna() & (m.astype(str).str.len() > 0)
-        ok = m.isin(modes).to_numpy() | (~present.to_numpy() & (not mode_required))
-        report("mode", ~ok, m.to_numpy(dtype=object), f"one of {list(modes)}")
-    good = out.loc[~bad_any]
+        cells = m.to_numpy(dtype=object)
+        known = np.zeros(len(cells), dtype=bool)
+        for name in modes:  # the common case: every mode is a known one
+            known |= cells == name
+        if not known.all():
+            present = m.notna() & (m.astype(str).str.len() > 0)
+            ok = m.isin(modes).to_numpy() | (~present.to_numpy() & (not mode_required))
+            report("mode", ~ok, lambda: cells, f"one of {list(modes)}")
+    good = out.loc[~bad_any] if bad_any.any() else out
     rejected = (pd.concat(reasons, ignore_index=True) if reasons
-                else pd.DataFrame(columns=["row", "field", "value", "reason"]))
+                else _NO_REJECTED.copy())  # building an empty frame costs more than copying
     if on_error == "collect" and len(good) == 0:
         raise ValueError(f"{what}: all {len(out)} rows were rejected; first reason: "
                          f"{rejected['reason'].iloc[0]}")
