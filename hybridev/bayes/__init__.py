@@ -1,4 +1,5 @@
-"""Bayesian calibration layer: priors, likelihood, emcee sampling and the physics posterior.
+"""Bayesian calibration layer: priors, likelihood, emcee sampling, the physics posterior and
+the model-discrepancy stage (:mod:`hybridev.bayes.discrepancy`).
 
 Imports the layers below it (core, physics, data); never torch.
 """
