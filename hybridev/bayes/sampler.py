@@ -52,8 +52,13 @@ from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
 from hybridev.physics.stats_build import trip_stats
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = [ "PhysicsPosterior",
+__all__ = ["AUTO_GROUP_COLUMNS", "PhysicsPosterior",
            "calibrate_physics", "simulate_measured"]
+
+AUTO_GROUP_COLUMNS = ("date", "session_group")
+"""Columns ``groups="auto"`` looks for, in this order (trips of one day or session
+share weather, traffic and driver, so their errors are correlated); also used by
+:func:`hybridev.learning.splits.group_codes`."""
 
 
 def _moves():
@@ -298,7 +303,7 @@ def _group_codes(trips: pd.DataFrame, groups) -> np.ndarray | None:
         return None
     if isinstance(groups, str):
         if groups == "auto":
-            col = next((c for c in ("date", "session_group") if c in trips.columns), None)
+            col = next((c for c in AUTO_GROUP_COLUMNS if c in trips.columns), None)
             if col is None:
                 return None
             groups = col

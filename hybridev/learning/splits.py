@@ -14,11 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
+from hybridev.bayes.sampler import AUTO_GROUP_COLUMNS
 
-AUTO_GROUP_COLUMNS = ("date", "session_group")
-"""Columns ``groups="auto"`` looks for, in this order (trips of one day or session
-share weather, traffic and driver, so their errors are correlated)."""
+__all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
 
 
 def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarray:
