@@ -73,7 +73,10 @@ def _uninstall() -> None:
 
 @contextlib.contextmanager
 def guard(cleanup: Callable[[], None]) -> Iterator[None]:
-    """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends."""
+    """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends.
+
+    ``cleanup`` must be idempotent: a signal during or right after it runs it again.
+    """
     key = next(_COUNTER)
     with _LOCK:
         _PENDING[key] = cleanup
@@ -81,13 +84,18 @@ def guard(cleanup: Callable[[], None]) -> Iterator[None]:
     try:
         yield
     finally:
+        # Run the action while it is still registered: a signal arriving now re-runs it
+        # (actions are idempotent) instead of finding it already unregistered and
+        # ending the process before it ran (a left-over temporary folder).
         with _LOCK:
-            act = _PENDING.pop(key, None)
-            if not _PENDING:
-                _uninstall()
+            act = _PENDING.get(key)
         if act is not None:
             with contextlib.suppress(Exception):
                 act()
+        with _LOCK:
+            _PENDING.pop(key, None)
+            if not _PENDING:
+                _uninstall()
 
 
 def remove_path(p: Path) -> None:
