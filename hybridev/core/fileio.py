@@ -23,9 +23,13 @@ __all__ = ["atomic_dir", "atomic_path", "read_table", "write_table"]
 def atomic_path(path: str | os.PathLike, *, option: str = "path") -> Iterator[Path]:
     """Yield a temporary file path that replaces ``path`` only on success.
 
-    See :func:`hybridev.core.outputs.atomic_file`.
+    The plain atomic write (:func:`hybridev.core.outputs.atomic_replace`), for
+    outputs the caller owns (the workflow scripts' committed outputs, files
+    the caller checked itself); command outputs go through
+    :func:`hybridev.core.outputs.atomic_file`, which never replaces a file
+    hybridev did not write.
     """
-    with outputs.atomic_file(path, option=option) as tmp:
+    with outputs.atomic_replace(path, option=option) as tmp:
         yield tmp
 
 

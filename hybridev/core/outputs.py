@@ -14,8 +14,10 @@ The rules (also in the README, section "Safety"):
   error, and on SIGINT/SIGTERM, the temporary files are removed and any
   previous output is left as it was.
 * **Never destroy what we did not write.** A *file* output replaces an
-  existing regular file of that name (the user named it), never a folder or
-  an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
+  existing file only if hybridev wrote it there and nobody changed it since
+  (the folder's register :data:`~hybridev.core.owned.REGISTER_FILE`, with the
+  SHA-256 of each file written; :mod:`hybridev.core.owned`); never a file of
+  the user's, a folder or an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
   model, a report) replaces an existing folder only if it is empty or carries
   this package's marker :data:`MANIFEST_FILE` listing every file in it (a
   folder hybridev wrote, and nothing added since). A *merged* folder
@@ -28,7 +30,11 @@ API
 suffixes=..., inputs=[...], names=[...]) -> Path``
     Validate an output path before the work.
 ``atomic_file(path, option=...)``
-    Context manager yielding a temporary path; moved to ``path`` on success.
+    Context manager yielding a temporary path; moved to ``path`` on success
+    (an existing ``path`` only if hybridev wrote it).
+``atomic_replace(path, option=...)``
+    The same without the ownership rule, for files inside folder outputs and
+    the workflow scripts' own committed outputs.
 ``write_table(df, path, option=...)``, ``write_text(text, path, option=...)``,
 ``save_figure(fig, path, option=...)``
     One-call atomic writers (a failed write raises ``ValueError`` naming the option).
@@ -62,9 +68,10 @@ from hybridev.core.manifest import (
     sha256_file,
     write_manifest,
 )
+from hybridev.core.owned import REGISTER_FILE, is_owned, record_owned
 
-__all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "TABLE_SUFFIXES", "atomic_file",
-           "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
+__all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "REGISTER_FILE", "TABLE_SUFFIXES", "atomic_file",
+           "atomic_replace", "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
            "sha256_file", "write_table", "write_text"]
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -103,7 +110,8 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
     option : str
         Name shown in the error (``"--out"``, ``"--plot"``, ``"path"``).
     kind : {"file", "model_dir", "dir", "merge_dir"}
-        ``file``: a single file (an existing regular file is replaced).
+        ``file``: a single file; an existing file is replaced only if hybridev
+        wrote it and it is unchanged since (:func:`hybridev.core.owned.is_owned`).
         ``model_dir``/``dir``: a folder replaced as a whole, allowed only when
         absent, empty or written by hybridev (:data:`MANIFEST_FILE`).
         ``merge_dir``: a folder into which the entries ``names`` are written;
@@ -167,8 +175,10 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
             if p.suffix.lower() not in allowed:
                 raise ValueError(f"{what} must end in one of {allowed}; got "
                                  f"{p.suffix or 'no extension'!r}")
-        if os.path.lexists(p) and not p.is_file():
+        if os.path.lexists(p) and (not p.is_file() or p.is_symlink()):
             raise ValueError(f"{what} exists and is not a regular file")
+        if os.path.lexists(p) and not is_owned(p):
+            raise ValueError(_foreign_file(what))
     else:
         if os.path.lexists(p) and not p.is_dir():
             raise ValueError(f"{what} exists and is not a folder; hybridev never replaces a "
@@ -217,6 +227,12 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
     return p
 
 
+def _foreign_file(what: str) -> str:
+    return (f"{what} exists and was not written by hybridev (or was changed since); "
+            "hybridev never overwrites a file it did not create: move it away or choose "
+            "another path")
+
+
 def _could_not(option: str, path, exc: BaseException) -> ValueError:
     return ValueError(f"{option}={os.fspath(path)!r} could not be written: {exc}")
 
@@ -226,6 +242,11 @@ def _could_not(option: str, path, exc: BaseException) -> ValueError:
 def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[Path]:
     """Yield a temporary file path in the target's folder; moved to ``path`` on success.
 
+    An existing ``path`` is replaced only if hybridev wrote it and it is
+    unchanged since (else ValueError naming ``option``, and nothing is
+    written); the new file is added to the folder's register
+    (:mod:`hybridev.core.owned`).
+
     Examples
     --------
     >>> import tempfile
@@ -233,7 +254,28 @@ def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[P
     >>> with atomic_file(d / "a.txt") as tmp:
     ...     _ = tmp.write_text("hi")
     >>> (d / "a.txt").read_text(), sorted(p.name for p in d.iterdir())
-    ('hi', ['a.txt'])
+    ('hi', ['.hybridev-files.json', 'a.txt'])
+    >>> with atomic_file(d / "a.txt") as tmp:  # hybridev wrote it: may be replaced
+    ...     _ = tmp.write_text("again")
+    >>> _ = (d / "b.txt").write_text("the user's")
+    >>> with atomic_file(d / "b.txt") as tmp:
+    ...     _ = tmp.write_text("no")
+    Traceback (most recent call last):
+    ...
+    ValueError: --out=... exists and was not written by hybridev (or was changed since); ...
+    """
+    with atomic_replace(path, option, register=True) as tmp:
+        yield tmp
+
+
+@contextlib.contextmanager
+def atomic_replace(path, option: str = "path", *, register: bool = False) -> Iterator[Path]:
+    """The atomic write under :func:`atomic_file`, without its ownership rule by default.
+
+    ``register=False``: ``path`` is replaced whoever wrote it and is not added to the
+    register. For files inside a folder output (its manifest, covered by the
+    folder's own marker) and for the outputs that the project's own workflow
+    scripts (``evaluation/``, ``calibration/``, ``benchmarks/``) regenerate in place.
     """
     path = _resolve(path)
     try:
@@ -247,9 +289,13 @@ def atomic_file(path: str | os.PathLike, *, option: str = "--out") -> Iterator[P
     with guard(lambda: remove_path(tmp)):
         try:
             yield tmp
+            if register and os.path.lexists(path) and not is_owned(path):
+                raise ValueError(_foreign_file(f"{option}={str(path)!r}"))
             os.replace(tmp, path)
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
+    if register:
+        record_owned(path)
 
 
 def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
@@ -394,7 +440,7 @@ def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
             for name in names:
                 files[name] = "folder" if (target / name).is_dir() else sha256_file(target / name)
             doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
-            with atomic_file(target / MANIFEST_FILE, option=option) as mtmp:
+            with atomic_replace(target / MANIFEST_FILE, option) as mtmp:
                 mtmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         except OSError as exc:
             raise _could_not(option, target, exc) from exc

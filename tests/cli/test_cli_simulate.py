@@ -28,7 +28,21 @@ def test_writes_paper_dataset_with_contract_columns(tmp_path, capsys):
     want = simulate(make_trips(1500, seed=0), seed=0)
     np.testing.assert_allclose(got["energy_kwh_physics"], want["energy_kwh_physics"], rtol=1e-12)
     assert got["mode"].tolist() == want["mode"].tolist()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.csv"]  # no temp files left
+    # no temp files left; the register says hybridev wrote x.csv (so a re-run may replace it)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".hybridev-files.json", "x.csv"]
+    rc, _, err = run(capsys, "--n-trips", "10", "--seed", "0", "--out", str(path))
+    assert rc == 0, err
+    assert len(pd.read_csv(path)) == 10
+
+
+def test_refuses_to_overwrite_a_file_it_did_not_write(tmp_path, capsys):
+    path = tmp_path / "x.csv"
+    path.write_text("my data\n")
+    rc, _, err = run(capsys, "--n-trips", "5", "--out", str(path))
+    assert rc == 2
+    assert "--out=" in err and "never overwrites a file it did not create" in err
+    assert path.read_text() == "my data\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["x.csv"]
 
 
 def test_parquet_output_and_new_directory(tmp_path, capsys):
@@ -79,7 +93,9 @@ def test_bad_out_paths_exit_2(tmp_path, capsys):
 
 def test_failed_write_leaves_no_output_and_keeps_old_file(tmp_path, capsys, monkeypatch):
     path = tmp_path / "x.csv"
-    path.write_text("old\n")
+    rc, _, err = run(capsys, "--n-trips", "3", "--out", str(path))  # an output of ours
+    assert rc == 0, err
+    before = path.read_bytes()
 
     def broken_to_csv(self, target, *args, **kwargs):
         with open(target, "w") as fh:
@@ -90,8 +106,8 @@ def test_failed_write_leaves_no_output_and_keeps_old_file(tmp_path, capsys, monk
     rc, _, err = run(capsys, "--n-trips", "5", "--out", str(path))
     assert rc == 2
     assert "could not be written" in err and "No space left" in err
-    assert path.read_text() == "old\n"
-    assert [p.name for p in tmp_path.iterdir()] == ["x.csv"]
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".hybridev-files.json", "x.csv"]
 
 
 def test_argparse_rejects_non_integers(capsys):

@@ -103,7 +103,7 @@ def test_write_table_atomic_and_failure_leaves_old_file(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match=r"--out=.*could not be written.*No space left"):
         O.write_table(pd.DataFrame({"a": [3]}), path)
     assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == ["p.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [O.REGISTER_FILE, "p.csv"]
 
 
 def test_output_dir_replaces_only_its_own_folders(tmp_path):
@@ -148,6 +148,35 @@ def test_merge_dir_keeps_user_files(tmp_path):
     assert sorted(p.name for p in res.iterdir() if not p.name.startswith(".")) == sorted([
         O.MANIFEST_FILE, "my_notes.txt", "report", "summary.json", "table.csv"])
     assert not [p for p in res.iterdir() if p.name.startswith(".")]
+
+
+def test_file_output_never_overwrites_a_file_hybridev_did_not_write(tmp_path):
+    mine = tmp_path / "mine.csv"
+    mine.write_text("the user's table\n")
+    for call in (lambda: O.check_output(mine, suffixes=O.TABLE_SUFFIXES),
+                 lambda: O.write_table(pd.DataFrame({"a": [1]}), mine),
+                 lambda: O.write_text("x", mine)):
+        with pytest.raises(ValueError, match=r"--out=.*mine.csv.*not written by hybridev"):
+            call()
+        assert mine.read_text() == "the user's table\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.csv"]  # no temp file left
+
+
+def test_file_output_replaces_its_own_file_until_the_user_edits_it(tmp_path):
+    out = tmp_path / "pred.csv"
+    O.write_table(pd.DataFrame({"a": [1]}), out)
+    assert O.check_output(out, suffixes=O.TABLE_SUFFIXES) == out  # re-running is allowed
+    O.write_table(pd.DataFrame({"a": [2]}), out)
+    assert pd.read_csv(out)["a"].tolist() == [2]
+    out.write_text("a\n99\n")  # the user changed it: it is theirs now
+    with pytest.raises(ValueError, match="not written by hybridev"):
+        O.write_table(pd.DataFrame({"a": [3]}), out)
+    assert out.read_text() == "a\n99\n"
+    other = tmp_path / "other.csv"  # a register that is not ours proves nothing
+    other.write_text("x")
+    (tmp_path / O.REGISTER_FILE).write_text('{"files": {"other.csv": "0"}}')
+    with pytest.raises(ValueError, match="not written by hybridev"):
+        O.check_output(other)
 
 
 _SAVE_LOOP = textwrap.dedent("""
