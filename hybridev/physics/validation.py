@@ -120,18 +120,22 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
     bad_any = np.zeros(len(out), dtype=bool)
     reasons: list[pd.DataFrame] = []
 
+    errors: list[str] = []  # "raise" mode: every invalid field, raised together at the end
+
     def report(field: str, mask: np.ndarray, values, allowed: str) -> None:
         nonlocal bad_any
+        if on_error == "raise":
+            if mask.any():
+                i = int(np.flatnonzero(mask)[0])
+                errors.append(
+                    f"{int(mask.sum())} row(s) have an invalid {field!r}; first at row "
+                    f"{out.index[i]!r}: {field}={np.asarray(values(), dtype=object)[i]!r}, "
+                    f"allowed {allowed}")
+            return
         new = mask & ~bad_any
         if not new.any():
             return
         values = values()  # the raw cells, only built when some row fails
-        if on_error == "raise":
-            i = int(np.flatnonzero(mask)[0])
-            raise ValueError(
-                f"{what}: {int(mask.sum())} row(s) have an invalid {field!r}; first at row "
-                f"{out.index[i]!r}: {field}={np.asarray(values, dtype=object)[i]!r}, "
-                f"allowed {allowed}")
         vals = np.asarray(values, dtype=object)[new]
         reasons.append(pd.DataFrame({
             "row": out.index[new], "field": field, "value": vals,
@@ -161,6 +165,8 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
             present = m.notna() & (m.astype(str).str.len() > 0)
             ok = m.isin(modes).to_numpy() | (~present.to_numpy() & (not mode_required))
             report("mode", ~ok, lambda: cells, f"one of {list(modes)}")
+    if errors:
+        raise ValueError(f"{what}: " + errors[0] + "".join(f"; also {e}" for e in errors[1:]))
     good = out.loc[~bad_any] if bad_any.any() else out
     rejected = (pd.concat(reasons, ignore_index=True) if reasons
                 else _NO_REJECTED.copy())  # building an empty frame costs more than copying
@@ -190,7 +196,8 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     Raises
     ------
     ValueError
-        Naming the field, the first bad value and the allowed range.
+        Naming each invalid field with its count of bad rows, the first bad
+        row and value, and the allowed range.
 
     Examples
     --------
@@ -201,6 +208,13 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     Traceback (most recent call last):
     ...
     ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]
+
+    Every invalid field is named at once:
+
+    >>> validate_trips(t.assign(temperature_c=295.0))
+    Traceback (most recent call last):
+    ...
+    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]; also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0, allowed [-50, 60]
     """
     good, _ = check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
     return good

@@ -79,6 +79,19 @@ def test_bad_value_names_field_value_and_range(field, value, allowed):
         validate_trips(with_value(field, value))
 
 
+def test_every_invalid_field_is_named_in_one_error():
+    t = with_value("distance_km", -1.0)
+    t.loc[0, "temperature_c"] = 295.0  # a Kelvin value
+    t.loc[[1, 3], "soc_initial"] = 80.0  # a percentage
+    with pytest.raises(ValueError) as exc:
+        validate_trips(t)
+    msg = str(exc.value)
+    assert msg.startswith("trips: 1 row(s) have an invalid 'distance_km'; first at row 2")
+    assert "also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0" in msg
+    assert "also 2 row(s) have an invalid 'soc_initial'; first at row 1: soc_initial=80.0, " \
+           "allowed [0, 1]" in msg
+
+
 def test_speed_boundary_250_is_allowed():
     assert len(validate_trips(with_value("avg_speed_kmh", 250.0))) == 4
 
