@@ -29,8 +29,8 @@ Inputs the model was trained with but a trip lacks also leave the domain
 training trip had one, a logged trace when most training trips had one.
 
 Out-of-domain trips get intervals from the physics posterior predictive plus
-an inflation that grows with the score (see
-:func:`hybridev.learning.uncertainty` and :data:`OOD_INFLATION_PER_UNIT`), and
+an inflation that grows with the score (see :mod:`hybridev.learning.ood` and
+:data:`OOD_INFLATION_PER_UNIT`), and
 the network inputs of every trip are clipped to their training range
 (:meth:`TrainingDomain.clip_features`), so that the residual does not
 extrapolate: outside the training distances it keeps its boundary value.
@@ -72,7 +72,8 @@ MISSING_INPUT_SCORE = 2.0
 """Domain score of a trip lacking an input the model was trained with."""
 
 OOD_INFLATION_PER_UNIT = 0.25
-"""Out-of-domain spread multiplier ``1 + 0.25 (score - 1)``, capped at 3 (score 9)."""
+"""Out-of-domain spread multiplier ``1 + 0.25 (score - 1)``, capped at 3 (score 9), on
+every part of the spread but the physics posterior draws (:mod:`hybridev.learning.ood`)."""
 
 _MAX_INFLATION = 3.0
 

@@ -4,19 +4,33 @@ A trip outside the training domain gets the spread ``sd_ood`` instead of the
 model's own (conformally calibrated) one:
 
 * outside the training ranges or in a gap of them (largest gap ``g > 1``):
-  ``sqrt(var_draws + (noise_rel E_p)^2 + (mu - E_p)^2 + sd^2) * inflation(g)``,
-  the physics posterior predictive (posterior draws and the posterior's
-  relative noise ``noise_rel``), the model's own spread, and the residual's
-  departure from the physics (which the training data no longer vouch for),
-  times :meth:`~hybridev.learning.domain.TrainingDomain.inflation`;
+  ``sqrt(var_draws + inflation(g)^2 * rest)``, with
+  ``rest = (noise_rel E_p)^2 + (mu - E_p)^2 + max(sd^2 - var_draws, 0)``: the
+  physics posterior predictive (the spread of the posterior draws,
+  ``var_draws``, and the posterior's relative noise ``noise_rel``), the
+  residual's departure from the physics (which the training data no longer
+  vouch for) and the rest of the model's own spread (network members and
+  noise), with
+  :meth:`~hybridev.learning.domain.TrainingDomain.inflation` on everything but
+  the posterior draws. The draws are not inflated: where the training trips
+  did not pin a parameter down (the heating of a car logged in summer only),
+  the posterior there *is* its prior, whose spread already says how little is
+  known, and inflating it as well gave a summer-trained real car intervals
+  several times its cold trips' energy (``evaluation/shift_and_small_data``,
+  the M1 warm-trained folds). The inflation is for what the posterior cannot
+  know: the model's own misspecification away from its data;
 * lacking the ``mode`` every training trip had: marginalised over the three
   modes: the spread between the three modes' predictions is added (no
   inflation);
 * lacking the logged trace most training trips had: a gap of 2.
 
-Intervals of such trips are ``mu +- z_level * sd_ood`` (never narrower than
-the in-domain interval); :meth:`predict_distribution` scales each trip's spread
-by ``sd_ood / sd``.
+Intervals of such trips are ``mu +- z_level * sd_ood``, never narrower than
+the final model's own conformally calibrated interval ``mu +- q sd``. With
+CV+ the CV+ interval is not used for them: its guarantee rests on the new trip
+being exchangeable with the training trips, which an out-of-domain trip is
+not, and there its width measures only how far the fold models' predictions
+spread. :meth:`predict_distribution` scales each trip's spread by
+``sd_ood / sd``.
 """
 
 from __future__ import annotations
@@ -47,9 +61,9 @@ class OutOfDomainMixin:
         """``(domain_score, in_domain, sd_ood)`` per trip; warns once when some are out.
 
         ``sd_ood`` (kWh) of a trip outside the training ranges or in a gap of
-        them is the physics posterior predictive spread (posterior draws and
-        its relative noise) together with the model's own spread and the
-        residual's departure from the physics, times the inflation
+        them is the spread of the physics posterior draws, plus the posterior's
+        relative noise, the residual's departure from the physics and the rest
+        of the model's own spread, these three times the inflation
         :meth:`~hybridev.learning.domain.TrainingDomain.inflation` of its
         largest gap. A trip only lacking the ``mode`` the model was trained
         with is marginalised over the three modes instead: its spread adds
@@ -78,8 +92,10 @@ class OutOfDomainMixin:
         post = getattr(self, "posterior_", None)
         noise = float(np.median(post.noise_rel)) if post is not None else 0.0
         e_p = table["energy_kwh_physics"].to_numpy(float)
-        var_pp = var_draws + (noise * e_p) ** 2 + (mu - e_p) ** 2 + sd**2
-        sd_ood = np.where(gap > 1.0, np.sqrt(var_pp) * TrainingDomain.inflation(gap), sd)
+        # the posterior draws' spread as it is; the rest (noise, network) inflated
+        rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + np.maximum(sd**2 - var_draws, 0.0)
+        infl = TrainingDomain.inflation(gap)
+        sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
         no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
                    else np.zeros(n, dtype=bool))
         if no_mode.any():
