@@ -432,15 +432,17 @@ class ProbabilisticMixin(OutOfDomainMixin):
         lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
         score, ok, sd_ood = self._ood_spread(table, dist, traces)
         z2, z1 = float(ndtri(0.5 + level / 2.0)), float(ndtri(level))
-        # out of the domain: mu +- z sd_ood (learning.ood), never narrower than the final
-        # model's own calibrated interval; not the CV+ interval, whose exchangeability an
-        # out-of-domain trip breaks (there its width measures only the fold models' spread)
-        half = np.maximum(z2 * sd_ood, (q if q is not None else z2) * sd)
-        lo = np.where(ok, lo, mu - half)
-        hi = np.where(ok, hi, mu + half)
-        one = (mu - self.conformal_.lower_bound(mu, sd, level) if q is not None
-               else z1 * sd)
-        lo_one = np.where(ok, lo_one, mu - np.maximum(z1 * sd_ood, one))
+        if cv and not ok.all():
+            # out of the domain the CV+ interval is not used: its guarantee needs a trip
+            # exchangeable with the training ones, and there its width measures only the
+            # fold models' spread; the final model's own calibrated interval instead
+            lo = np.where(ok, lo, mu - q * sd)
+            hi = np.where(ok, hi, mu + q * sd)
+            lo_one = np.where(ok, lo_one, self.conformal_.lower_bound(mu, sd, level))
+        # out of the domain: mu +- z sd_ood (learning.ood), never narrower than that
+        lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
+        hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))
+        lo_one = np.where(ok, lo_one, np.minimum(lo_one, mu - z1 * sd_ood))
         lo, hi, lo_one = (np.maximum(a, floor) for a in (lo, hi, lo_one))
         lo_one = np.minimum(lo_one, point)  # the SoC interval always holds the point prediction
         cap = self._vehicle().battery_capacity_kwh
