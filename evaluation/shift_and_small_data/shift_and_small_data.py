@@ -12,7 +12,9 @@ Studies (all with ``HybridModel`` defaults unless a conformal mode is named):
    truth: its vehicle differs from the model's nominal one (mass +8 %, drag and
    rolling resistance +10 %) and its speed traces and noise come from seeds the
    model never uses (truth seeds >= 100, model ``physics_seed=0``). Split
-   conformal, CV+ and the default (``"auto"``) side by side; 1,000 test trips.
+   conformal, CV+ and the default (``"auto"``) side by side; 1,000 test trips;
+   8 training draws per size up to 40 trips (``--small-seeds``: one fit's
+   coverage there varies by about 0.05 from draw to draw), 2 above (``--seeds``).
 2. **Warm-trained, cold-tested** on the synthetic truth: trained on the 20 and
    32 degC trips only, tested on all temperatures (-5 degC is new). Coverage of
    flagged and unflagged rows, share of out-of-temperature rows flagged, and the

@@ -210,11 +210,13 @@ def test_signal_during_save_leaves_no_temporary_folder(tmp_path, sig):
         assert ready.exists(), proc.stderr.read().decode()
         time.sleep(0.15)
         proc.send_signal(sig)
-        proc.wait(timeout=60)
+        # communicate, not wait: drain stderr so that the child can never block on a full
+        # pipe; a generous limit, as the import wait above (a loaded 2-core CI machine)
+        _, err = proc.communicate(timeout=180)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode != 0
+    assert proc.returncode != 0, err.decode()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["model"]
     assert O.is_hybridev_dir(target)
     assert sorted(p.name for p in target.iterdir()) == sorted([

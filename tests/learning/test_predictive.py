@@ -135,3 +135,18 @@ def test_soc_from_energy_is_clipped_and_monotone():
     assert np.all(np.diff(soc) <= 0)
     inside = (soc > 0) & (soc < 1)
     np.testing.assert_allclose(soc[inside], 0.6 - e[inside] / 75.0)
+
+
+@pytest.mark.parametrize("factor", [1.0, 0.7, 1.6, "per-trip"])
+def test_excess_var_is_the_variance_beyond_the_physics_draws(factor):
+    rng = np.random.default_rng(3)
+    draws = 10.0 + rng.normal(0.0, 2.0, (200, 6))
+    c = rng.uniform(0.5, 2.0, 6) if factor == "per-trip" else factor
+    d = EnergyDistribution(draws, rng.normal(0.0, 0.3, (5, 6)), rng.uniform(0.1, 0.4, (5, 6)),
+                           spread_factor=c)
+    want = np.maximum(d.std() ** 2 - draws.var(axis=0), 0.0)
+    np.testing.assert_allclose(d.excess_var(), want, rtol=1e-9, atol=1e-12)
+    # without members' spread or noise there is nothing beyond the draws (c = 1): exactly 0,
+    # where the subtraction leaves rounding residue of either sign
+    flat = EnergyDistribution(draws, np.zeros((3, 6)), np.zeros((3, 6)))
+    assert (flat.excess_var() == 0.0).all()
