@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 from hybridev.cli.main import main
+from hybridev.core.owned import REGISTER_FILE
 
 from .conftest import lost_files, snapshot
 from .test_cli_odd import _bad_tables
@@ -137,8 +138,9 @@ def run_case(pool_dir, work, case, monkeypatch):
     assert rc in (0, 2), (argv, rc, err)
     assert "Traceback" not in err, (argv, err)
     assert lost_files(before, after, allowed) == [], (argv, err)
-    assert not [p for p in work.rglob(".*")
-                if p.name != "_hybridev-manifest.json"], (argv, "temporary file left")
+    assert not [p for p in work.rglob(".*")  # the marker and the register of file outputs
+                if p.name not in ("_hybridev-manifest.json", REGISTER_FILE)], (
+        argv, "temporary file left")
     if rc == 2:
         assert set(after) <= set(before), (argv, "a failed run wrote", set(after) - set(before))
         last = err.strip().splitlines()[-1]  # bad rows may be reported before the error
