@@ -36,11 +36,21 @@ def _cleanup_all() -> None:
             act()
 
 
+_INTERRUPTED: list[int] = []
+"""SIGINTs whose KeyboardInterrupt is on its way: raised again by :func:`guard` if lost."""
+
+
 def _on_signal(signum, frame) -> None:
     _cleanup_all()
     prev = _PREVIOUS.pop(signum, signal.SIG_DFL)
     with contextlib.suppress(ValueError, TypeError):
         signal.signal(signum, prev)
+    if prev is signal.default_int_handler:
+        # Python runs a handler at the next bytecode of the main thread, which may be
+        # inside a finaliser (__del__): there the KeyboardInterrupt is printed as
+        # "Exception ignored" and lost, and the program ran on (a saving loop never
+        # ended). Remember it: the enclosing guard raises it again when it ends.
+        _INTERRUPTED.append(signum)
     if callable(prev):
         prev(signum, frame)  # e.g. KeyboardInterrupt for SIGINT
     else:
@@ -76,6 +86,8 @@ def guard(cleanup: Callable[[], None]) -> Iterator[None]:
     """Run ``cleanup`` on exit, and on SIGINT/SIGTERM before the process ends.
 
     ``cleanup`` must be idempotent: a signal during or right after it runs it again.
+    A SIGINT whose ``KeyboardInterrupt`` was swallowed inside the block (raised
+    in a finaliser, where Python only prints it) is raised again at its end.
     """
     key = next(_COUNTER)
     with _LOCK:
@@ -83,6 +95,9 @@ def guard(cleanup: Callable[[], None]) -> Iterator[None]:
         _install()
     try:
         yield
+    except BaseException:
+        _INTERRUPTED.clear()  # an interrupt, if any, is on its way up
+        raise
     finally:
         # Run the action while it is still registered: a signal arriving now re-runs it
         # (actions are idempotent) instead of finding it already unregistered and
@@ -96,6 +111,9 @@ def guard(cleanup: Callable[[], None]) -> Iterator[None]:
             _PENDING.pop(key, None)
             if not _PENDING:
                 _uninstall()
+    if _INTERRUPTED:  # a SIGINT's KeyboardInterrupt was lost in the block: raise it now
+        _INTERRUPTED.clear()
+        raise KeyboardInterrupt
 
 
 def remove_path(p: Path) -> None:
