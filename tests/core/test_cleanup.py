@@ -8,8 +8,13 @@ import pytest
 
 from hybridev.core.cleanup import guard
 
-pytestmark = pytest.mark.skipif(signal.getsignal(signal.SIGINT) is not signal.default_int_handler,
-                                reason="needs Python's default SIGINT handler")
+
+@pytest.fixture(autouse=True)
+def default_sigint():
+    """Python's own SIGINT handler for the test (another test or library may have changed it)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
 
 
 def _interrupt_and_swallow():

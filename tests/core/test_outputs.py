@@ -195,12 +195,20 @@ _SAVE_LOOP = textwrap.dedent("""
 """)
 
 
+def _default_signals():
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_signal_during_save_leaves_no_temporary_folder(tmp_path, sig):
     target, ready = tmp_path / "out" / "model", tmp_path / "ready"
     env = dict(os.environ, PYTHONPATH=str(Path(O.__file__).parents[2]))
+    # the child inherits an *ignored* SIGINT if anything in this test process set one
+    # (then Python keeps it ignored and the save loop never ends): start it with the
+    # default dispositions, as a user's shell would
     proc = subprocess.Popen([sys.executable, "-c", _SAVE_LOOP, str(target), str(ready)],
-                            env=env, stderr=subprocess.PIPE)
+                            env=env, stderr=subprocess.PIPE, preexec_fn=_default_signals)
     try:
         deadline = time.monotonic() + 180.0  # a loaded CI machine may take long to import
         while time.monotonic() < deadline:
