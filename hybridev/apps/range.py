@@ -367,7 +367,7 @@ def _ood_ratio(model, base: pd.DataFrame, r: np.ndarray, e_med: np.ndarray,
         distance_km=np.minimum(r.ravel(), d_max), energy_kwh_physics=e_med.ravel())
     sd = np.maximum(dist.std(), 1e-12)
     _, ok, sd_ood = model._ood_sd(rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0),
-                                  var_rest=dist.excess_var())
+                                  dist=dist)
     return np.where(ok, 0.0, sd_ood / sd)
 
 

@@ -71,18 +71,18 @@ class OutOfDomainMixin:
         lacking a trained-with logged trace counts as a gap of 2.
         """
         score, ok, sd_ood = self._ood_sd(table, dist.mean(), dist.std(),
-                                         dist.physics_draws_kwh.var(axis=0), traces,
-                                         var_rest=dist.excess_var())
+                                         dist.physics_draws_kwh.var(axis=0), traces, dist=dist)
         warn_out_of_domain(int((~ok).sum()), dist.n_trips, stacklevel=4)
         return score, ok, sd_ood
 
     def _ood_sd(self, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray,
-                var_draws: np.ndarray, traces=None, *, var_rest: np.ndarray | None = None
+                var_draws: np.ndarray, traces=None, *, dist: EnergyDistribution | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_ood_spread` from the pieces: means, spreads and physics-draw variances.
 
-        ``var_rest``: the model's variance beyond the physics draws'
-        (:meth:`EnergyDistribution.excess_var`); by default
+        ``dist``: the distribution behind them; its
+        :meth:`~EnergyDistribution.excess_var` gives the variance beyond the
+        draws' (only when some trip is out of the domain). Without it,
         ``max(sd^2 - var_draws, 0)``, which loses digits when the draws dominate.
         """
         dom = getattr(self, "domain_", None)
@@ -99,8 +99,8 @@ class OutOfDomainMixin:
         noise = float(np.median(post.noise_rel)) if post is not None else 0.0
         e_p = table["energy_kwh_physics"].to_numpy(float)
         # the posterior draws' spread as it is; the rest (noise, network) inflated
-        if var_rest is None:
-            var_rest = np.maximum(sd**2 - var_draws, 0.0)
+        var_rest = (dist.excess_var() if dist is not None
+                    else np.maximum(sd**2 - var_draws, 0.0))
         rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
         infl = TrainingDomain.inflation(gap)
         sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
