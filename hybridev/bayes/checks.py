@@ -7,8 +7,7 @@ import dataclasses
 import numpy as np
 import pandas as pd
 
-from hybridev.bayes.priors import PhysicsPrior
-from hybridev.physics.params import PROFILES
+from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX, PhysicsPrior
 
 __all__ = ["prior_check"]
 
@@ -53,13 +52,12 @@ def prior_check(post, level: float = 0.99) -> pd.DataFrame:
     pr = PhysicsPrior(**{k: tuple(v) if isinstance(v, list) else v
                          for k, v in post.prior.items() if k in known})
     nom = post.nominal_values(post.vehicle)
-    eta_r_max = max(p.regen_efficiency for p in PROFILES.values())
     cd = post.vehicle.road_load_source == "coastdown"
     z = float(norm.ppf(0.5 + level / 2))
     med = np.median(post.samples, axis=0)
     rows = []
     for name, m in zip(post.param_names, med, strict=True):
-        kind, c, sd, lo, hi = pr.spec(name, nom[name], eta_r_max, coastdown=cd)
+        kind, c, sd, lo, hi = pr.spec(name, nom[name], REGEN_EFFICIENCY_MAX, coastdown=cd)
         if kind == "lognormal":
             a, b, centre = np.exp(c - z * sd), np.exp(c + z * sd), np.exp(c)
             shift = (np.log(m) - c) / sd if m > 0 else -np.inf

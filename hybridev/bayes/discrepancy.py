@@ -25,6 +25,16 @@ re-solved under ``1 + delta >= 0`` at that shrinkage (a term never turns
 negative, so extrapolating to a colder or longer trip never removes energy),
 and their posterior covariance gives draws for the predictive spread.
 
+* **Physical bound on regeneration.** The four regenerated-energy terms
+  (:data:`~hybridev.physics.stats.REGEN_TERMS`) carry the posterior's regen scale
+  ``s``; their multipliers are bounded by ``1 / (s REGEN_EFFICIENCY_MAX)``
+  (:data:`hybridev.bayes.priors.REGEN_EFFICIENCY_MAX`), the same bound as the
+  prior of ``s``: no profile recovers more than its braking energy, at any
+  temperature. Without it, a fit on winter trips (where the cold factors lower
+  the regeneration) could raise these multipliers until a summer trip recovered
+  more than its braking energy (``evaluation/seasonal_car``: a winter-trained
+  model under-predicted summer trips by ~40 %). Draws are clipped to the same bound.
+
 * Terms the fitting trips never excite (no heating in a summer log, no
   regeneration in a synthetic set without braking) keep weight 1: the
   discrepancy does not extrapolate a term it has not seen.
@@ -40,16 +50,48 @@ posterior) stay physical.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from scipy.optimize import lsq_linear
 from sklearn.linear_model import BayesianRidge
 
-from hybridev.physics.stats import N_TERMS, PhysicsStats, term_energies
+from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
+from hybridev.physics.stats import N_TERMS, REGEN_TERMS, PhysicsStats, term_energies
 
-__all__ = ["TermDiscrepancy"]
+__all__ = ["TermDiscrepancy", "regen_upper_bounds"]
 
 _ACTIVE_TOL = 1e-6
 """A term is fitted when some trip has ``|T_ik| / s_i`` above this."""
+
+
+def regen_upper_bounds(stats: PhysicsStats, params) -> np.ndarray:
+    """Upper bounds of the 14 multipliers: ``1 / (s REGEN_EFFICIENCY_MAX)`` on regeneration.
+
+    Parameters
+    ----------
+    stats : PhysicsStats
+    params : mapping or VehicleParams or None
+        One parameter set; ``s`` is its ``regen_scale`` (1 when absent).
+
+    Returns
+    -------
+    numpy.ndarray, shape (14,)
+        ``inf`` for the terms that are not regenerated energy.
+
+    Examples
+    --------
+    >>> from hybridev import make_trips, trip_stats
+    >>> s = trip_stats(make_trips(2, seed=0), n_steps=50)
+    >>> regen_upper_bounds(s, {"regen_scale": 1.25})[[0, 7]].round(3).tolist()
+    [inf, 1.067]
+    """
+    scale = 1.0
+    if isinstance(params, Mapping) and "regen_scale" in params:
+        scale = float(np.asarray(params["regen_scale"], dtype=float).reshape(-1)[0])
+    upper = np.full(N_TERMS, np.inf)
+    upper[list(REGEN_TERMS)] = 1.0 / (max(scale, 1e-12) * REGEN_EFFICIENCY_MAX)
+    return upper
 
 
 class TermDiscrepancy:
@@ -69,6 +111,9 @@ class TermDiscrepancy:
     shrinkage : float
         The evidence-maximising ``lambda / alpha`` (ridge penalty in units of
         the relative residual).
+    upper : array_like, shape (14,), optional
+        Upper bounds of the multipliers (default: none); :meth:`fit` sets
+        the regeneration bound.
 
     Examples
     --------
@@ -81,15 +126,19 @@ class TermDiscrepancy:
     (True, (3, 14))
     """
 
-    def __init__(self, weights, cov, active, shrinkage: float = 0.0) -> None:
+    def __init__(self, weights, cov, active, shrinkage: float = 0.0, upper=None) -> None:
         self.weights = np.asarray(weights, dtype=float).reshape(N_TERMS)
         self.active = np.asarray(active, dtype=bool).reshape(N_TERMS)
         k = int(self.active.sum())
         self.cov = np.asarray(cov, dtype=float).reshape(k, k)
         self.shrinkage = float(shrinkage)
+        self.upper = (np.full(N_TERMS, np.inf) if upper is None
+                      else np.asarray(upper, dtype=float).reshape(N_TERMS))
         if not (np.all(np.isfinite(self.weights)) and np.all(self.weights >= 0)
-                and np.all(np.isfinite(self.cov))):
-            raise ValueError("TermDiscrepancy: weights must be finite and >= 0 and cov finite")
+                and np.all(np.isfinite(self.cov)) and np.all(self.upper > 0)
+                and np.all(self.weights <= self.upper * (1 + 1e-9))):
+            raise ValueError("TermDiscrepancy: weights must be finite, >= 0 and <= upper "
+                             "(upper > 0), and cov finite")
 
     @classmethod
     def fit(cls, stats: PhysicsStats, params, energy_kwh, scale_kwh) -> TermDiscrepancy:
@@ -118,40 +167,44 @@ class TermDiscrepancy:
                              "scale_kwh > 0")
         z = t / s[:, None]
         r = (y - t.sum(axis=1)) / s
+        upper = regen_upper_bounds(stats, params)
         active = np.max(np.abs(z), axis=0, initial=0.0) > _ACTIVE_TOL
         if len(y) < 3 or not active.any():
-            return cls(np.ones(N_TERMS), np.zeros((0, 0)), np.zeros(N_TERMS, bool))
+            return cls(np.ones(N_TERMS), np.zeros((0, 0)), np.zeros(N_TERMS, bool),
+                       upper=upper)
         za = z[:, active]
         br = BayesianRidge(fit_intercept=False, max_iter=1000).fit(za, r)
         lam = float(br.lambda_ / br.alpha_)
         k = za.shape[1]
+        hi = upper[active] - 1.0
         sol = lsq_linear(np.vstack([za, np.sqrt(lam) * np.eye(k)]), np.r_[r, np.zeros(k)],
-                         bounds=(-1.0, np.inf))
+                         bounds=(np.full(k, -1.0), hi))
         w = np.ones(N_TERMS)
-        w[active] = 1.0 + np.maximum(sol.x, -1.0)
-        return cls(w, br.sigma_, active, lam)
+        w[active] = 1.0 + np.clip(sol.x, -1.0, hi)
+        return cls(w, br.sigma_, active, lam, upper=upper)
 
     def sample(self, n: int, rng=None) -> np.ndarray:
-        """``n`` draws of the multipliers, shape (n, 14), each ``>= 0``."""
+        """``n`` draws of the multipliers, shape (n, 14), each in ``[0, upper]``."""
         rng = np.random.default_rng(rng)
         out = np.tile(self.weights, (int(n), 1))
         if self.active.any() and n:
             cov = 0.5 * (self.cov + self.cov.T)
             out[:, self.active] += rng.multivariate_normal(
                 np.zeros(len(cov)), cov, size=int(n), method="eigh")
-        return np.maximum(out, 0.0)
+        return np.clip(out, 0.0, self.upper)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays for a saved model (see :meth:`from_arrays`)."""
         return {"weights": self.weights, "cov": self.cov, "active": self.active,
-                "shrinkage": np.array([self.shrinkage])}
+                "shrinkage": np.array([self.shrinkage]), "upper": self.upper}
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> TermDiscrepancy:
         """Inverse of :meth:`to_arrays` (``ValueError`` on missing or bad arrays)."""
         try:
             return cls(arrays["weights"], arrays["cov"], arrays["active"],
-                       float(np.asarray(arrays["shrinkage"]).reshape(-1)[0]))
+                       float(np.asarray(arrays["shrinkage"]).reshape(-1)[0]),
+                       upper=arrays.get("upper"))  # models saved before the bound: none
         except KeyError as err:
             raise ValueError(f"saved discrepancy is missing array {err}") from None
 

@@ -7,9 +7,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hybridev.physics.params import LOGGED_PROFILE, PROFILES
 from hybridev.physics.stats import STAT_PARAMS
 
-__all__ = ["CLIMATE_PARAMS", "DEFAULT_PARAMS", "PhysicsPrior"]
+__all__ = ["CLIMATE_PARAMS", "DEFAULT_PARAMS", "REGEN_EFFICIENCY_MAX", "PhysicsPrior"]
+
+REGEN_EFFICIENCY_MAX = max(p.regen_efficiency for p in (*PROFILES.values(), LOGGED_PROFILE))
+"""Highest warm-weather regen efficiency of any profile (0.75, ``eco``).
+
+``regen_scale`` is bounded by its inverse, so that no profile regenerates more than
+its braking energy at any temperature. The bound is taken from the profiles, not
+from the trips' statistics: there the cold factors
+(:func:`hybridev.physics.thermal.cold_factors`) have already lowered the regen
+efficiency, and a bound taken from a winter log would let a posterior fitted on cold
+trips regenerate more than the braking energy on warm ones."""
 
 
 DEFAULT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency",

@@ -43,7 +43,12 @@ import pandas as pd
 
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
-from hybridev.bayes.priors import CLIMATE_PARAMS, DEFAULT_PARAMS, PhysicsPrior
+from hybridev.bayes.priors import (
+    CLIMATE_PARAMS,
+    DEFAULT_PARAMS,
+    REGEN_EFFICIENCY_MAX,
+    PhysicsPrior,
+)
 from hybridev.core.checks import check_seed
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 from hybridev.data.measured import validate_measured_trips
@@ -233,7 +238,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                          f"[{2 * ndim}, inf) for {ndim} sampled dimension(s)")
     nominal = PhysicsPosterior.nominal_values(veh)
     cd = veh.road_load_source == "coastdown"
-    specs = [pr.spec(n, nominal[n], float(stats.eta_r.max()), coastdown=cd) for n in names]
+    specs = [pr.spec(n, nominal[n], REGEN_EFFICIENCY_MAX, coastdown=cd) for n in names]
     fixed = {n: nominal[n] for n in STAT_PARAMS if n not in names}
     scale = np.array([s[2] * (np.exp(s[1]) if s[0] == "lognormal" else 1.0) for s in specs]
                      + [1.0] * n_alr + [pr.group_sd_scale] * n_group + [1.0])

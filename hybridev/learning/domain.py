@@ -209,6 +209,25 @@ class TrainingDomain:
         s = np.asarray(score, float)
         return np.clip(1.0 + OOD_INFLATION_PER_UNIT * (s - 1.0), 1.0, _MAX_INFLATION)
 
+    @staticmethod
+    def discrepancy_fade(score) -> np.ndarray:
+        """Weight of the model-discrepancy stage at a gap ``score``: 1 down to 0, in [0, 1].
+
+        ``1 - (inflation(score) - 1) / 2``: 1 inside the domain (``score <= 1``),
+        falling linearly to 0 where the inflation saturates (``score >= 9``).
+        Kennedy and O'Hagan's discrepancy reverts to its prior (none) away from
+        the data; :mod:`hybridev.bayes.discrepancy`'s term weights are fitted
+        where the trips were, and a trade between collinear terms there (the
+        heating against the auxiliary load in a winter log) does not hold where
+        one of them vanishes (``evaluation/seasonal_car``).
+
+        Examples
+        --------
+        >>> TrainingDomain.discrepancy_fade([0.5, 1.0, 5.0, 9.0, 20.0]).tolist()
+        [1.0, 1.0, 0.5, 0.0, 0.0]
+        """
+        return 1.0 - (TrainingDomain.inflation(score) - 1.0) / (_MAX_INFLATION - 1.0)
+
     # -- persistence -------------------------------------------------------------------
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Arrays for the saved model (see :mod:`hybridev.learning.persist`)."""

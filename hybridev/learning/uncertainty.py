@@ -121,7 +121,8 @@ class ProbabilisticMixin(OutOfDomainMixin):
         :meth:`_physics_energies`.
         """
         stats = self._stats(trips, traces) if stats is None else stats
-        energy = self._physics_energies(stats, n_draws, seed, physics)
+        energy = self._physics_energies(stats, n_draws, seed, physics,
+                                        fade=self._discrepancy_fade(trips, traces))
         e_med = energy[0]
         e_draws = energy[1:] if n_draws else energy[:1]
         vmax = stats.max_speed_kmh
@@ -142,23 +143,45 @@ class ProbabilisticMixin(OutOfDomainMixin):
         post: PhysicsPosterior = self.posterior_
         return post.stats_for(trips, traces)
 
-    def _physics_energies(self, stats, n_draws: int, seed: int, physics=None) -> np.ndarray:
+    def _physics_energies(self, stats, n_draws: int, seed: int, physics=None, *,
+                          fade=None) -> np.ndarray:
         """Energies ``(1 + n_draws, n_trips)``: posterior median, then draws, kWh.
 
         ``physics`` is a ``(posterior, discrepancy)`` pair (default: the
         model's ``posterior_`` and ``discrepancy_``); the discrepancy's term
         weights (:mod:`hybridev.bayes.discrepancy`) multiply the physics terms,
-        its draws pair with the parameter draws.
+        its draws pair with the parameter draws. ``fade`` (n_trips,), from
+        :meth:`_discrepancy_fade`, blends each trip's energies from the
+        calibrated physics (0) to the re-weighted one (1).
         """
         post, disc = physics or (self.posterior_, getattr(self, "discrepancy_", None))
         med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
         rng = np.random.default_rng(seed)
         draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
-        weights = None
-        if disc is not None:
-            weights = np.vstack([disc.weights, disc.sample(n_draws, rng)])
-        return energy_from_stats(stats, post.as_params(np.vstack([med, draws])),
-                                 term_weights=weights)
+        params = post.as_params(np.vstack([med, draws]))
+        if disc is None:
+            return energy_from_stats(stats, params)
+        weights = np.vstack([disc.weights, disc.sample(n_draws, rng)])
+        energy = energy_from_stats(stats, params, term_weights=weights)
+        if fade is not None:
+            plain = energy_from_stats(stats, params)
+            energy = plain + fade * (energy - plain)
+        return energy
+
+    def _discrepancy_fade(self, trips: pd.DataFrame, traces=None) -> np.ndarray | None:
+        """Per-trip weight of the discrepancy stage, None when it is 1 for every trip.
+
+        1 inside the training domain, fading to 0 with the trip's largest gap
+        (:meth:`~hybridev.learning.domain.TrainingDomain.discrepancy_fade`): away from
+        the fitting trips the prediction reverts to the calibrated physics, whose
+        parameters the priors keep physical. A missing ``mode`` or trace alone does
+        not fade it (they are handled by :mod:`hybridev.learning.ood`).
+        """
+        dom = getattr(self, "domain_", None)
+        if dom is None or getattr(self, "discrepancy_", None) is None or not len(trips):
+            return None
+        gap = dom.gaps(trips, traces).max(axis=1)
+        return None if np.all(gap <= 1.0) else dom.discrepancy_fade(gap)
 
     def _fit_discrepancy(self, post: PhysicsPosterior, measured: pd.DataFrame,
                          traces=None) -> TermDiscrepancy | None:

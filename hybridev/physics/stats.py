@@ -59,6 +59,7 @@ from hybridev.physics.params import VehicleParams
 
 __all__ = [
     "N_TERMS",
+    "REGEN_TERMS",
     "STAT_PARAMS",
     "PhysicsStats",
     "coefficients",
@@ -224,6 +225,11 @@ def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
 
 N_TERMS = 14
 """Rows of :meth:`PhysicsStats.features` (energy terms of a trip)."""
+
+REGEN_TERMS = (4, 5, 6, 7)
+"""Rows of :meth:`PhysicsStats.features` that are regenerated energy (coefficient
+``s x``): rolling, aerodynamic, linear-drag and inertia-plus-grade parts of the
+braking intervals."""
 
 
 def _check_term_weights(term_weights) -> np.ndarray:

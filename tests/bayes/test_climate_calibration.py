@@ -102,3 +102,24 @@ def test_groups_need_unmarginalised_trips():
     assert "group_sd" not in post.diagnostics
     with pytest.raises(ValueError, match="groups"):
         calibrate_physics(m, params=("aux_base_kw",), n_steps=300, groups="date")
+
+
+def test_regen_bound_does_not_loosen_on_cold_trips():
+    """Cold trips carry a lowered regen efficiency (cold factors) in their statistics; the
+    prior's bound on regen_scale still comes from the warm profiles, so a posterior fitted
+    on winter trips never regenerates more than the braking energy on a warm trip. The
+    truth's car loses no regeneration in the cold and regenerates 1.3x the nominal, so the
+    model (which expects -25 % at -5 degC) wants ~1.3 / 0.7, beyond the bound 1 / 0.75."""
+    import dataclasses
+
+    from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
+
+    t = _trips(120, 5)
+    t["temperature_c"] = np.linspace(-15.0, -5.0, len(t))
+    truth_car = dataclasses.replace(CAR, cold_regen_loss_per_k=0.0)
+    m = simulate_measured(t, truth_car, true_params={"regen_scale": 1.3}, noise_rel=0.02,
+                          seed=3)
+    post = _calibrate(m, params=("regen_scale", "aux_base_kw"), groups=None)
+    s = post.samples[:, post.param_names.index("regen_scale")]
+    assert s.max() <= 1.0 / REGEN_EFFICIENCY_MAX + 1e-12
+    assert np.median(s) > 1.25  # the data do pull it up, to the bound

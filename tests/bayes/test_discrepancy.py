@@ -65,3 +65,33 @@ def test_weights_never_negative_and_draws_roundtrip(stats):
         TermDiscrepancy.from_arrays({"weights": d.weights})
     with pytest.raises(ValueError, match="scale_kwh"):
         TermDiscrepancy.fit(stats, None, y, np.zeros(len(y)))
+
+
+def test_regen_multipliers_never_recover_more_than_the_braking_energy(stats):
+    """Truth regenerates 2x the modelled braking energy (beyond the physical limit): the
+    regen multipliers stop at 1 / (s REGEN_EFFICIENCY_MAX), in the fit and in every draw,
+    and the bound survives a save/load; models saved before the bound load without it."""
+    from hybridev.bayes.discrepancy import regen_upper_bounds
+    from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
+    from hybridev.physics.stats import REGEN_TERMS
+
+    t = term_energies(stats)
+    w = np.ones(N_TERMS)
+    w[list(REGEN_TERMS)] = 2.0
+    y = np.maximum(t @ w, 0.01)
+    params = {"regen_scale": np.array([[1.2]])}
+    d = TermDiscrepancy.fit(stats, params, y, np.abs(t.sum(axis=1)))
+    cap = 1.0 / (1.2 * REGEN_EFFICIENCY_MAX)
+    regen = list(REGEN_TERMS)
+    np.testing.assert_allclose(regen_upper_bounds(stats, params)[regen], cap)
+    assert np.all(d.weights[regen] <= cap + 1e-12)
+    assert d.weights[7] == pytest.approx(cap)  # the braking term is pushed to its bound
+    assert np.all(d.sample(500, 0)[:, regen] <= cap + 1e-12)
+    assert np.all(np.isinf(d.upper[[k for k in range(N_TERMS) if k not in regen]]))
+    back = TermDiscrepancy.from_arrays(d.to_arrays())
+    np.testing.assert_array_equal(back.upper, d.upper)
+    old = {k: v for k, v in d.to_arrays().items() if k != "upper"}
+    assert np.all(np.isinf(TermDiscrepancy.from_arrays(old).upper))
+    with pytest.raises(ValueError, match="upper"):
+        TermDiscrepancy(np.full(N_TERMS, 2.0), np.zeros((0, 0)), np.zeros(N_TERMS, bool),
+                        upper=np.ones(N_TERMS))

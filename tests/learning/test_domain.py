@@ -131,3 +131,31 @@ def test_ood_spread_inflates_all_but_the_posterior_draws():
     _, _, sd2 = stub._ood_sd(table, mu + np.array([0.0, 0.4, 0.0]), np.array([1.0, 0.3, 0.1]),
                              np.array([1.0, 0.0, 0.0]))
     np.testing.assert_allclose(sd2, [1.0, 3.0 * 0.5, 0.1])
+
+
+def test_discrepancy_fades_to_the_calibrated_physics_out_of_the_domain():
+    """Inside the training domain the physics column is the discrepancy-weighted physics;
+    far outside it (largest gap >= 9: the -5 degC trips of a model trained at 20 and
+    32 degC) it is the calibrated physics alone, and in between the linear blend."""
+    from hybridev.physics.stats import energy_from_stats
+
+    d = make_dataset(300, truth="structured", seed=3, n_steps=100)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(n_steps=100, max_epochs=10, n_members=2, conformal="split",
+                        physics_seed=1).fit(d[d.temperature_c > 0].head(80), seed=0)
+    assert m.discrepancy_ is not None and not np.allclose(m.discrepancy_.weights, 1.0)
+    test = d.drop(columns=["energy_kwh", "soc_final"]).iloc[100:300]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        out = m.predict(test)
+    valid = m._validated(test)
+    stats = m._stats(valid)
+    med = m.posterior_.as_params(np.median(m.posterior_.samples, axis=0)[None, :])
+    plain = energy_from_stats(stats, med)[0]
+    weighted = energy_from_stats(stats, med, term_weights=m.discrepancy_.weights)[0]
+    fade = TrainingDomain.discrepancy_fade(m.domain_.gaps(valid).max(axis=1))
+    assert (fade == 1.0).any() and (fade == 0.0).any()
+    assert not np.allclose(weighted[fade == 0.0], plain[fade == 0.0])
+    np.testing.assert_allclose(out.energy_kwh_physics, plain + fade * (weighted - plain),
+                               rtol=1e-9)
