@@ -1,9 +1,10 @@
 """Options shared by the subcommands: the vehicle, a logger's columns, logged traces, outputs.
 
-* ``--coastdown A B C MASS`` and ``--capacity-kwh``: the vehicle
-  (:meth:`hybridev.VehicleParams.from_coastdown`); a saved model carries its
-  vehicle, so with ``--model`` a different road load is an error and
-  ``--capacity-kwh`` only changes how energy maps to SoC.
+* ``--coastdown A B C MASS``, ``--heater {ptc,heat_pump}`` and ``--capacity-kwh``:
+  the vehicle (:meth:`hybridev.VehicleParams.from_coastdown`; ``--heater`` sets its
+  ``heater_kind``, default ``ptc``, and needs ``--coastdown``); a saved model
+  carries its vehicle, so with ``--model`` a different road load or heater is an
+  error and ``--capacity-kwh`` only changes how energy maps to SoC.
 * ``--columns old=new,...`` and/or ``--columns-file map.csv`` (two columns
   ``old,new``): rename a logger's columns to the contract before anything
   else. The same mapping applies to the time series (columns it lacks are
@@ -35,6 +36,10 @@ def add_vehicle_arguments(p: argparse.ArgumentParser) -> None:
                    metavar=("A_N", "B_N_PER_KMH", "C_N_PER_KMH2", "MASS_KG"),
                    help="your vehicle from its coast-down road load F = A + B v + C v^2 "
                         "(v in km/h) and test mass (default: the paper's vehicle)")
+    p.add_argument("--heater", choices=("ptc", "heat_pump"), default=None,
+                   help="cabin heater of a --coastdown vehicle: ptc (resistive, the default) "
+                        "or heat_pump (a heat pump's COP falls with the cold; see the spec "
+                        "sheet: the calibration learns how much it is used, not which kind)")
     p.add_argument("--capacity-kwh", type=float, default=None,
                    help="usable battery capacity, kWh (maps energy to SoC; default: the "
                         "vehicle's, 75 kWh for the paper's)")
@@ -57,12 +62,19 @@ def add_input_arguments(p: argparse.ArgumentParser, *, timeseries: bool = True) 
 
 
 def vehicle_from_args(args: argparse.Namespace):
-    """The :class:`~hybridev.VehicleParams` of ``--coastdown`` / ``--capacity-kwh``."""
+    """The :class:`~hybridev.VehicleParams` of ``--coastdown`` / ``--heater`` / ``--capacity-kwh``."""
     from hybridev.physics.params import VehicleParams
 
     cap = getattr(args, "capacity_kwh", None)
     extra = {} if cap is None else {"battery_capacity_kwh": cap}
     cd = getattr(args, "coastdown", None)
+    heater = getattr(args, "heater", None)
+    if heater is not None:
+        if cd is None:
+            raise ValueError(f"--heater={heater!r} needs --coastdown A B C MASS: the paper's "
+                             "vehicle (the default) uses the paper's four HVAC power bands, "
+                             "which have no heater kind")
+        extra["heater_kind"] = heater
     if cd is not None:
         return VehicleParams.from_coastdown(*cd, **extra)
     return VehicleParams(**extra)
@@ -73,14 +85,16 @@ def model_with_vehicle(model, args: argparse.Namespace):
     import dataclasses
 
     veh = model._vehicle()
-    if getattr(args, "coastdown", None) is not None:
+    if getattr(args, "coastdown", None) is not None or getattr(args, "heater", None):
         want = vehicle_from_args(args)
         fields = [f.name for f in dataclasses.fields(veh)
                   if f.name not in ("battery_capacity_kwh", "source")]
         if any(getattr(want, f) != getattr(veh, f) for f in fields):
-            raise ValueError(f"--coastdown={args.coastdown!r} does not match the saved model's "
-                             f"vehicle ({veh.source}); the road load is fixed when fitting: "
-                             "re-fit with --coastdown, or leave it out here")
+            raise ValueError(f"--coastdown={args.coastdown!r} --heater="
+                             f"{getattr(args, 'heater', None)!r} does "
+                             f"not match the saved model's vehicle ({veh.source}, heater "
+                             f"{veh.heater_kind}); the road load and heater are fixed when "
+                             "fitting: re-fit with them, or leave them out here")
     if getattr(args, "capacity_kwh", None) is not None:
         model.vehicle = dataclasses.replace(veh, battery_capacity_kwh=args.capacity_kwh)
         model._check_params()
