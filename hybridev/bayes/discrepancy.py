@@ -65,12 +65,11 @@ _ACTIVE_TOL = 1e-6
 """A term is fitted when some trip has ``|T_ik| / s_i`` above this."""
 
 
-def regen_upper_bounds(stats: PhysicsStats, params) -> np.ndarray:
+def regen_upper_bounds(params) -> np.ndarray:
     """Upper bounds of the 14 multipliers: ``1 / (s REGEN_EFFICIENCY_MAX)`` on regeneration.
 
     Parameters
     ----------
-    stats : PhysicsStats
     params : mapping or VehicleParams or None
         One parameter set; ``s`` is its ``regen_scale`` (1 when absent).
 
@@ -81,9 +80,7 @@ def regen_upper_bounds(stats: PhysicsStats, params) -> np.ndarray:
 
     Examples
     --------
-    >>> from hybridev import make_trips, trip_stats
-    >>> s = trip_stats(make_trips(2, seed=0), n_steps=50)
-    >>> regen_upper_bounds(s, {"regen_scale": 1.25})[[0, 7]].round(3).tolist()
+    >>> regen_upper_bounds({"regen_scale": 1.25})[[0, 7]].round(3).tolist()
     [inf, 1.067]
     """
     scale = 1.0
@@ -167,7 +164,7 @@ class TermDiscrepancy:
                              "scale_kwh > 0")
         z = t / s[:, None]
         r = (y - t.sum(axis=1)) / s
-        upper = regen_upper_bounds(stats, params)
+        upper = regen_upper_bounds(params)
         active = np.max(np.abs(z), axis=0, initial=0.0) > _ACTIVE_TOL
         if len(y) < 3 or not active.any():
             return cls(np.ones(N_TERMS), np.zeros((0, 0)), np.zeros(N_TERMS, bool),

@@ -100,7 +100,8 @@ def fit_cv_plus(model, good, traces, codes: np.ndarray, xs: np.ndarray, ys: np.n
                 phys = model._calibrate(good.iloc[rest], int(seeds[f]) % 2**32, traces,
                                         sign_vehicle=post.reference_vehicle,
                                         n_steps=FOLD_POSTERIOR_STEPS)
-            table, _ = model._posterior_physics(valid, 0, 0, physics=phys, stats=stats)
+            table, _ = model._posterior_physics(valid, 0, 0, physics=phys, stats=stats,
+                                                fade=None)  # training trips: in the domain
             xs_f, ys_f = _training_arrays(model, table, e_meas)
         net, _ = model._train_net(xs_f, ys_f, tr, rest[val] if (~val).any() else rest[:0],
                                   int(seeds[f]))

@@ -111,18 +111,21 @@ class ProbabilisticMixin(OutOfDomainMixin):
 
     # -- physics -----------------------------------------------------------------------
     def _posterior_physics(self, trips: pd.DataFrame, n_draws: int, seed: int,
-                           traces=None, *, physics=None, stats=None
+                           traces=None, *, physics=None, stats=None, fade="auto"
                            ) -> tuple[pd.DataFrame, np.ndarray]:
         """Simulate-like table at the posterior median, and (n_draws, n_trips) energies.
 
         ``trips`` must be validated (:meth:`_validated`). The statistics are
         built once (or passed as ``stats``, from :meth:`_stats`); the median
         and the draws are one matrix product. ``physics``: see
-        :meth:`_physics_energies`.
+        :meth:`_physics_energies`. ``fade``: the discrepancy's weight per trip
+        (:meth:`_discrepancy_fade`, computed from ``trips`` and ``traces`` when
+        ``"auto"``; None: 1 for every trip).
         """
         stats = self._stats(trips, traces) if stats is None else stats
-        energy = self._physics_energies(stats, n_draws, seed, physics,
-                                        fade=self._discrepancy_fade(trips, traces))
+        if isinstance(fade, str) and fade == "auto":
+            fade = self._discrepancy_fade(trips, traces)
+        energy = self._physics_energies(stats, n_draws, seed, physics, fade=fade)
         e_med = energy[0]
         e_draws = energy[1:] if n_draws else energy[:1]
         vmax = stats.max_speed_kmh
@@ -264,13 +267,15 @@ class ProbabilisticMixin(OutOfDomainMixin):
         if has_post:
             valid = self._validated(trips)
             stats = self._stats(valid, traces)
+            fade = self._discrepancy_fade(valid, traces)  # once for every entry
         tables, dists, cache = [], [], {}
         for net, phys in zip(nets, physics, strict=True):
             key = id(phys)
             if key not in cache:  # the physics part of this entry (shared by entries)
                 if has_post:
                     table, draws = self._posterior_physics(
-                        valid, int(self.n_posterior_draws), seed, physics=phys, stats=stats)
+                        valid, int(self.n_posterior_draws), seed, physics=phys, stats=stats,
+                        fade=fade)
                 else:
                     table = self._physics(trips, traces)
                     draws = table["energy_kwh_physics"].to_numpy(float)[None, :]

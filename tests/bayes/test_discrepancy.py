@@ -83,7 +83,7 @@ def test_regen_multipliers_never_recover_more_than_the_braking_energy(stats):
     d = TermDiscrepancy.fit(stats, params, y, np.abs(t.sum(axis=1)))
     cap = 1.0 / (1.2 * REGEN_EFFICIENCY_MAX)
     regen = list(REGEN_TERMS)
-    np.testing.assert_allclose(regen_upper_bounds(stats, params)[regen], cap)
+    np.testing.assert_allclose(regen_upper_bounds(params)[regen], cap)
     assert np.all(d.weights[regen] <= cap + 1e-12)
     assert d.weights[7] == pytest.approx(cap)  # the braking term is pushed to its bound
     assert np.all(d.sample(500, 0)[:, regen] <= cap + 1e-12)
