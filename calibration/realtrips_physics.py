@@ -329,7 +329,7 @@ car in {sessions} driving sessions, {len(m.traces.t_s):,} logged 1 Hz samples;
   defaults otherwise → C_dA = {VEHICLE.drag_area_m2:.3f} m², C_r = {VEHICLE.rolling_resistance_coef:.5f},
   b = {VEHICLE.linear_drag_n_per_mps:.3f} N/(m/s), η_d = {VEHICLE.drivetrain_efficiency},
   base auxiliary {VEHICLE.aux_base_kw} kW, drive loss {VEHICLE.drive_loss_kw} kW, continuous
-  climate model ({VEHICLE.heater_kind} heater, UA {VEHICLE.cabin_ua_w_per_k:g} W/K, set point
+  climate model (`heater_kind="{VEHICLE.heater_kind}"`, learned from the training trips: {post.vehicle.heater_kind}, ln B {post.diagnostics.get('heater', {}).get('log_evidence', float('nan')):.1f}; UA {VEHICLE.cabin_ua_w_per_k:g} W/K, set point
   {VEHICLE.t_set_c:g} °C) with per-step logged ambient temperature. Battery capacity
   {BATTERY_KWH:g} kWh and `soc_initial` = {SOC_INITIAL} are assumptions (the source has
   neither); no number below depends on them.

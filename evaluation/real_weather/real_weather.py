@@ -33,6 +33,7 @@ curve for a compact BEV against published measurements plus a sensitivity figure
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -146,7 +147,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
     keep = np.abs(feats).sum(axis=1) > 0
     xs = _summary_x(trips, extra)
     folds = np.full(len(y), -1)
-    posts, no_prior, weights = [], [], []
+    posts, no_prior, weights, heaters = [], [], [], []
     for k, (tr, te) in enumerate(GroupKFold(n_splits=N_FOLDS).split(
             xs, groups=trips["date"].to_numpy())):
         folds[te] = k
@@ -162,8 +163,13 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         pred["hybrid"][te] = out["energy_kwh_pred"]
         pred["physics_discrepancy"][te] = out["energy_kwh_physics"]
         weights.append(model.discrepancy_.weights.tolist())
-        w, _ = nnls(feats[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
-        pred["nnls_stats"][te] = feats[keep][:, te].T @ w
+        heaters.append(model.heater_kind_)
+        f_k = feats  # NNLS on the terms of the heater the fold's model learned
+        if model.heater_kind_ == "heat_pump" and vehicle.heater_kind != "heat_pump":
+            f_k = trip_stats(trips, dataclasses.replace(vehicle, heater_kind=model.heater_kind_),
+                             traces=m.traces).features()
+        w, _ = nnls(f_k[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
+        pred["nnls_stats"][te] = f_k[keep][:, te].T @ w
         free = _fit_no_prior(stats, y, tr)
         pred["physics_no_prior"][te] = energy_from_stats(stats.take(te), free)
         no_prior.append(free)
@@ -172,7 +178,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         kwh_km = np.median(y[tr] / trips["distance_km"].to_numpy(float)[tr])
         pred["median_kwh_per_km"][te] = kwh_km * trips["distance_km"].to_numpy(float)[te]
     return {"pred": pred, "folds": folds, "posteriors": posts, "y": y, "no_prior": no_prior,
-            "term_weights": weights}
+            "term_weights": weights, "heater_by_fold": heaters}
 
 
 def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) -> dict:
@@ -240,6 +246,7 @@ def main(argv=None) -> int:
                                             for p in cv["posteriors"]],
         "no_prior_fits_by_fold": cv["no_prior"],
         "discrepancy_term_weights_by_fold": cv["term_weights"],
+        "heater_kind_by_fold": cv["heater_by_fold"],
         "published_curve": rw_curves.curve_table(),
         "curve_diagnosis": rw_curves.diagnosis_minus15(),
         "tolerance": rw_curves.TOLERANCE,

@@ -150,6 +150,7 @@ def both_seasons(vehicle, m, extra, *, heat_pump: bool = False) -> dict:
                     "mape_by_season_pct": {s: float(np.abs(r[season == s]).mean() * 100)
                                            for s in ("summer", "winter")}}
     return {"scores": sc, "intervals": ints, "hybrid_heat_pump_declared": declared,
+            "heater_kind_by_fold": cv["heater_by_fold"],
             "posteriors_inside_prior_99": [
         bool(p.prior_check()["inside"].all()) for p in cv["posteriors"]],
         "prior_check": [p.prior_check().round(4).reset_index().to_dict("records")
@@ -168,6 +169,7 @@ def season_shift(vehicle, m, extra, train_season: str) -> dict:
         out = model.predict_interval(m.trips.iloc[te], level=LEVEL, timeseries=m.traces)
     res = interval_scores(y, out)
     res["train_n"] = len(tr)
+    res["heater_kind"] = model.heater_kind_
     res["nominal_physics_mape_pct"] = float(np.mean(np.abs(
         out["energy_kwh_physics"].to_numpy() / y - 1.0)) * 100)
     return res
@@ -207,7 +209,7 @@ def write(out_dir: Path, result: dict) -> None:
         hp = r["both_seasons"]["hybrid_heat_pump_declared"]
         if hp is not None:
             lines += ["", f"With the heat pump declared (`heater_kind=\"heat_pump\"`, "
-                      f"`--heater heat_pump`; the default is a PTC heater) the hybrid reaches "
+                      f"`--heater heat_pump`, instead of the default `auto`) the hybrid reaches "
                       f"{hp['mape_pct']:.2f} % MAPE (summer "
                       f"{hp['mape_by_season_pct']['summer']:.2f} %, winter "
                       f"{hp['mape_by_season_pct']['winter']:.2f} %, bias "
@@ -219,12 +221,18 @@ def write(out_dir: Path, result: dict) -> None:
             i = ints[s]
             lines.append(f"| {s} | {i['n']} | {i['coverage']:.3f} | {i['rel_width']:.3f} | "
                          f"{i['share_flagged']:.3f} |")
+        heaters = r["both_seasons"]["heater_kind_by_fold"]
+        lines += ["", f"Heater kind learned by `HybridModel` (`heater_kind=\"auto\"`) in the "
+                  f"{len(heaters)} folds: {', '.join(heaters)} (the truth: "
+                  f"{'heat pump' if r['car']['heat_pump'] else 'PTC'}); the `nnls_stats` "
+                  "baseline uses the same fold's heater terms."]
         inside = r["both_seasons"]["posteriors_inside_prior_99"]
         lines += ["", f"Fold posteriors with every median inside its prior's 99 % range: "
                   f"{inside}.", "", "### Season shift", "",
                   "| trained on -> tested on | n test | hybrid MAPE % | bias % | flagged | "
                   "coverage unflagged (n) | coverage flagged (n) | width flagged | "
-                  "Spearman conf_rel / distance |", "|---|---|---|---|---|---|---|---|---|"]
+                  "Spearman conf_rel / distance | heater learned |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for key, label in (("summer_to_winter", "summer -> winter"),
                            ("winter_to_summer", "winter -> summer")):
             s = r[key]
@@ -235,7 +243,7 @@ def write(out_dir: Path, result: dict) -> None:
             lines.append(f"| {label} | {s['n']} | {s['mape_pct']:.2f} | {s['bias_pct']:+.2f} | "
                          f"{s['share_flagged']:.3f} | {cu} | {cf} | {wf} | "
                          f"{s['spearman_confidence_rel']:+.2f} / "
-                         f"{s['spearman_distance']:+.2f} |")
+                         f"{s['spearman_distance']:+.2f} | {s['heater_kind']} |")
         lines.append("")
     with atomic_path(out_dir / "seasonal_car.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")

@@ -41,6 +41,7 @@ import emcee
 import numpy as np
 import pandas as pd
 
+from hybridev.bayes.heater import select_heater_kind
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import (
@@ -117,7 +118,11 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         Measured-trip table (``energy_kwh`` and/or ``soc_final``; ``mode`` may
         be missing) or the result of :func:`hybridev.data.logs.read_measured_trips`.
     vehicle : VehicleParams, optional
-        Nominal vehicle: prior centres and all parameters not sampled.
+        Nominal vehicle: prior centres and all parameters not sampled. A
+        ``heater_kind="auto"`` (the default of ``from_coastdown``) is first
+        resolved from the trips (:func:`hybridev.bayes.heater.select_heater_kind`;
+        the outcome is in ``diagnostics["heater"]``) and the posterior's
+        ``vehicle`` carries the chosen kind.
     params : tuple of str
         Sampled parameters, a subset of
         :data:`hybridev.physics.stats.STAT_PARAMS`.
@@ -218,6 +223,12 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         return trip_stats(trips, v, traces=traces, n_steps=trace_steps, seed=trace_seed,
                           missing_mode="marginalize" if want_infer else missing_mode)
 
+    heater = None
+    if veh.heater_kind == "auto" and veh.climate_model == "continuous":
+        heater = select_heater_kind(build, veh, y, groups=codes)  # bayes.heater
+        veh = dataclasses.replace(veh, heater_kind=heater.kind)
+    if sign_vehicle is not None and sign_vehicle.heater_kind != veh.heater_kind:
+        sign_vehicle = dataclasses.replace(sign_vehicle, heater_kind=veh.heater_kind)
     stats = build(veh if sign_vehicle is None else sign_vehicle)
     unlabelled = ("mode" not in trips.columns
                   or bool((trips["mode"].isna() | (trips["mode"].astype(str) == "")).any()))
@@ -296,10 +307,13 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
             chunk = int(min(max(need - done, 200), max_steps - done))
     mm_out = ("marginalize" if isinstance(missing_mode, str) and missing_mode == "infer"
               and not infer else missing_mode)
-    return PhysicsPosterior.from_sampler(
+    post = PhysicsPosterior.from_sampler(
         sampler, names, vehicle=veh, reference_vehicle=ref, prior=pr, map_theta=theta,
         missing_mode=mm_out, trace_steps=trace_steps, trace_seed=trace_seed,
         elapsed_s=time.perf_counter() - t0, n_group=n_group)
+    if heater is not None:
+        post.diagnostics["heater"] = heater.to_dict()
+    return post
 
 
 def _group_codes(trips: pd.DataFrame, groups) -> np.ndarray | None:

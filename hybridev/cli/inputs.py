@@ -1,9 +1,10 @@
 """Options shared by the subcommands: the vehicle, a logger's columns, logged traces, outputs.
 
-* ``--coastdown A B C MASS``, ``--heater {ptc,heat_pump}`` and ``--capacity-kwh``:
+* ``--coastdown A B C MASS``, ``--heater {auto,ptc,heat_pump}`` and ``--capacity-kwh``:
   the vehicle (:meth:`hybridev.VehicleParams.from_coastdown`; ``--heater`` sets its
-  ``heater_kind``, default ``ptc``, and needs ``--coastdown``); a saved model
-  carries its vehicle, so with ``--model`` a different road load or heater is an
+  ``heater_kind``, default ``auto``: learned from the trips at fit, and needs
+  ``--coastdown``); a saved model carries its vehicle (with the learned heater),
+  so with ``--model`` a different road load or a declared heater that differs is an
   error and ``--capacity-kwh`` only changes how energy maps to SoC.
 * ``--columns old=new,...`` and/or ``--columns-file map.csv`` (two columns
   ``old,new``): rename a logger's columns to the contract before anything
@@ -36,10 +37,11 @@ def add_vehicle_arguments(p: argparse.ArgumentParser) -> None:
                    metavar=("A_N", "B_N_PER_KMH", "C_N_PER_KMH2", "MASS_KG"),
                    help="your vehicle from its coast-down road load F = A + B v + C v^2 "
                         "(v in km/h) and test mass (default: the paper's vehicle)")
-    p.add_argument("--heater", choices=("ptc", "heat_pump"), default=None,
-                   help="cabin heater of a --coastdown vehicle: ptc (resistive, the default) "
-                        "or heat_pump (a heat pump's COP falls with the cold; see the spec "
-                        "sheet: the calibration learns how much it is used, not which kind)")
+    p.add_argument("--heater", choices=("auto", "ptc", "heat_pump"), default=None,
+                   help="cabin heater of a --coastdown vehicle: auto (the default: learned "
+                        "from the measured trips when fitting; PTC unless they show a heat "
+                        "pump's shape), ptc (resistive) or heat_pump (COP falls with the "
+                        "cold), if the spec sheet says")
     p.add_argument("--capacity-kwh", type=float, default=None,
                    help="usable battery capacity, kWh (maps energy to SoC; default: the "
                         "vehicle's, 75 kWh for the paper's)")
@@ -89,6 +91,8 @@ def model_with_vehicle(model, args: argparse.Namespace):
         want = vehicle_from_args(args)
         fields = [f.name for f in dataclasses.fields(veh)
                   if f.name not in ("battery_capacity_kwh", "source")]
+        if want.heater_kind == "auto":  # learned at fit: any saved kind matches
+            fields.remove("heater_kind")
         if any(getattr(want, f) != getattr(veh, f) for f in fields):
             raise ValueError(f"--coastdown={args.coastdown!r} --heater="
                              f"{getattr(args, 'heater', None)!r} does "

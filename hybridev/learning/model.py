@@ -38,6 +38,7 @@ best together.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import warnings
@@ -50,6 +51,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
+from hybridev.bayes.heater import select_heater_kind
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
@@ -220,7 +222,13 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
     fit_info_ : dict
         Trip counts, seed, fit time, validation-set errors and
         ``distance_km_range`` (shortest and longest fitting trip, km; past
-        them the residual is held, :mod:`hybridev.learning.physical`).
+        them the residual is held, :mod:`hybridev.learning.physical`) and,
+        when the heater kind was learned, ``heater`` (kind, ``log_evidence``,
+        residual sums of squares; :mod:`hybridev.bayes.heater`).
+    heater_kind_ : {"ptc", "heat_pump"} or None
+        The heater kind learned from the fitting trips when ``vehicle`` has
+        ``heater_kind="auto"`` (the default of ``VehicleParams.from_coastdown``);
+        every prediction then uses it. ``None`` when the vehicle declares its heater.
     posterior_ : PhysicsPosterior or None
         Physics posterior (``calibrate_physics=True``).
     discrepancy_ : TermDiscrepancy or None
@@ -294,7 +302,28 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         if not isinstance(self.vehicle, VehicleParams):
             raise ValueError(f"{type(self).__name__}.vehicle must be a VehicleParams or None; "
                              f"got {type(self.vehicle).__name__}")
-        return self.vehicle
+        kind = getattr(self, "heater_kind_", None)
+        if kind is None or self.vehicle.heater_kind != "auto":
+            return self.vehicle
+        cached = getattr(self, "_resolved_vehicle", None)
+        if cached is None or cached[0] is not self.vehicle or cached[1] != kind:
+            cached = (self.vehicle, kind, dataclasses.replace(self.vehicle, heater_kind=kind))
+            self._resolved_vehicle = cached
+        return cached[2]
+
+    def _select_heater(self, good: pd.DataFrame, traces, codes: np.ndarray) -> None:
+        """Resolve ``heater_kind="auto"`` from the trips (:mod:`hybridev.bayes.heater`)."""
+        self.heater_kind_ = None
+        v = self._vehicle()
+        if v.heater_kind != "auto" or v.climate_model != "continuous":
+            return None
+        mm = "marginalize" if self.missing_mode == "infer" else self.missing_mode
+        sel = select_heater_kind(
+            lambda w: trip_stats(good, w, traces=traces, n_steps=int(self.n_steps),
+                                 seed=int(self.physics_seed), missing_mode=mm),
+            v, good["energy_kwh"].to_numpy(float), groups=codes)
+        self.heater_kind_ = sel.kind
+        return sel
 
     def _feature_names(self) -> tuple[str, ...]:
         feats = self._default_features if self.features is None else self.features
@@ -542,6 +571,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         for attr in ("posterior_", "discrepancy_", "conformal_", "cv_nets_", "cv_physics_",
                      "domain_"):
             setattr(self, attr, [] if attr.startswith("cv_") else None)
+        heater = self._select_heater(good.iloc[rest], traces, codes[rest])
         if self._residual:  # the calibration trips stay out of the physics posterior too
             self._fit_posterior(good.iloc[rest], seed, traces)
         phys = self._physics(good, traces)
@@ -581,6 +611,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
                 "cv_folds": len(self.cv_nets_), "seed": int(seed), **self.fit_info_,
                 "n_epochs": hist["n_epochs"], "best_epoch": hist["best_epoch"].tolist(),
                 "n_parameters_per_member": self.n_parameters_}
+        if heater is not None:
+            info["heater"] = heater.to_dict()
         if n_val:
             dev = self._residual_moments(xs[val_idx], scale[val_idx])[0].mean(0)
             pred = self._combine(e_phys[val_idx], dev)

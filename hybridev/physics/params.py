@@ -31,8 +31,9 @@ __all__ = ["CLIMATE_MODELS", "COMPACT_BEV_AUX_KW", "COMPACT_BEV_DRIVE_LOSS_KW", 
 CLIMATE_MODELS = ("paper_bands", "continuous")
 """Allowed ``VehicleParams.climate_model`` values."""
 
-HEATER_KINDS = ("ptc", "heat_pump")
-"""Allowed ``VehicleParams.heater_kind`` values."""
+HEATER_KINDS = ("ptc", "heat_pump", "auto")
+"""Allowed ``VehicleParams.heater_kind`` values (``"auto"``: learned by the calibration,
+:mod:`hybridev.bayes.heater`; the physics treats it as ``"ptc"`` until then)."""
 
 
 def _check_range(owner: str, name: str, value: float, lo: float, hi: float,
@@ -105,9 +106,13 @@ class VehicleParams:
         below is then ignored. ``"continuous"``: the thermal model of
         :mod:`hybridev.physics.thermal` with the fields below (the default of
         :meth:`from_coastdown`, the new-user path).
-    heater_kind : {"ptc", "heat_pump"}
+    heater_kind : {"ptc", "heat_pump", "auto"}
         Resistive (PTC, COP 1) heater or heat pump (COP falls with ambient
         temperature, see :func:`hybridev.physics.thermal.heat_pump_cop`).
+        ``"auto"`` (the default of :meth:`from_coastdown`): unknown, chosen
+        from the measured trips by :func:`hybridev.bayes.heater.select_heater_kind`
+        when a model is calibrated (``HybridModel.fit``, ``calibrate_physics``);
+        the physics evaluates an unresolved ``"auto"`` as ``"ptc"``.
     cabin_ua_w_per_k : float
         Cabin heat loss per kelvin of cabin-ambient difference, conduction
         through the body and glazing plus the fresh-air (ventilation) stream,
@@ -312,9 +317,11 @@ class VehicleParams:
             Unless given, the result uses the continuous climate model with
             the compact-BEV defaults of the fields (``climate_model=
             "continuous"``), base auxiliary power :data:`COMPACT_BEV_AUX_KW`,
-            drive loss :data:`COMPACT_BEV_DRIVE_LOSS_KW` and
+            drive loss :data:`COMPACT_BEV_DRIVE_LOSS_KW`,
             ``road_load_source="coastdown"`` (tight calibration priors on
-            the road load): this is the new-user path, while the class
+            the road load) and ``heater_kind="auto"`` (learned from the
+            trips; pass ``"ptc"`` or ``"heat_pump"`` if the spec sheet
+            says): this is the new-user path, while the class
             defaults stay the paper's vehicle (see :meth:`paper`).
 
         Returns
@@ -327,7 +334,7 @@ class VehicleParams:
         >>> round(v.rolling_resistance_coef, 4), round(v.drag_area_m2, 3)
         (0.0095, 0.497)
         >>> v.climate_model, v.heater_kind
-        ('continuous', 'ptc')
+        ('continuous', 'auto')
         """
         for name, val in (("a_n", a_n), ("b_n_per_kmh", b_n_per_kmh),
                           ("c_n_per_kmh2", c_n_per_kmh2)):
@@ -343,6 +350,7 @@ class VehicleParams:
         kwargs.setdefault("source", f"coast-down A={a_n} N, B={b_n_per_kmh} N/(km/h), "
                                     f"C={c_n_per_kmh2} N/(km/h)^2, m={mass_kg} kg")
         kwargs.setdefault("climate_model", "continuous")
+        kwargs.setdefault("heater_kind", "auto")
         kwargs.setdefault("road_load_source", "coastdown")
         kwargs.setdefault("aux_base_kw", COMPACT_BEV_AUX_KW)
         kwargs.setdefault("drive_loss_kw", COMPACT_BEV_DRIVE_LOSS_KW)

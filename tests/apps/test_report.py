@@ -260,3 +260,12 @@ def test_cli_with_logged_timeseries(tmp_path, capsys):
     assert "synthesised" not in s["labels"]["hybrid"]
     assert s["data"]["n_rejected_timeseries"] == 1 and s["data"]["n_valid"] == 44
     assert {r["trip_id"] for r in s["rejected"]} == {"t000"}
+
+
+def test_report_names_the_learned_heater():
+    from hybridev.apps.report.html import _heater_note
+
+    fit = {"heater": {"kind": "heat_pump", "log_evidence": 13.2, "rss": {}, "n_eff": 119.8}}
+    note = _heater_note({"hybrid": {"fit_info": fit}})
+    assert "<b>heat_pump</b>" in note and "13.2" in note and "120 effective trips" in note
+    assert _heater_note({"hybrid": {"fit_info": {"n_trips": 5}}}) == ""

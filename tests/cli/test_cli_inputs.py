@@ -138,8 +138,8 @@ def test_output_format_checked_before_work(tmp_path, capsys, cmd):
 
 
 def test_heater_kind_of_a_coastdown_vehicle(logger, tmp_path, capsys):
-    """--heater sets the coast-down vehicle's heater; it needs --coastdown, takes only the
-    two kinds, and is part of the saved model's vehicle."""
+    """--heater sets the coast-down vehicle's heater; it needs --coastdown, takes only
+    auto and the two kinds, and is part of the saved model's vehicle (auto matches any)."""
     out = tmp_path / "m"
     base = ["fit", str(logger / "bare.csv"), "--timeseries", str(logger / "ts.parquet"),
             "--columns", "e_net=energy_kwh", "--soc-initial", "0.8", *FAST]
@@ -154,7 +154,9 @@ def test_heater_kind_of_a_coastdown_vehicle(logger, tmp_path, capsys):
                  "--heater", "heat_pump"]) == 0
     assert HybridModel.load(out)._vehicle().heater_kind == "heat_pump"
     rng = ["range", "--soc", "0.8", "--speed", "50", "--temp", "-5", "--model", str(out)]
-    assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500"]) == 2  # ptc by default
+    assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500", "--heater", "ptc"]) == 2
     assert "heater heat_pump" in capsys.readouterr().err
+    assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500"]) == 0  # auto: any kind
+    capsys.readouterr()
     assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500", "--heater",
                  "heat_pump"]) == 0

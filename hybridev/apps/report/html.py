@@ -90,6 +90,18 @@ def _metrics_table(s: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _heater_note(s: dict) -> str:
+    """The heater kind the hybrid learned (``heater_kind="auto"``), if it learned one."""
+    h = (s.get("hybrid", {}).get("fit_info") or {}).get("heater")
+    if not h:
+        return ""
+    return (f"<p>Heater kind learned from the training trips: <b>{html.escape(h['kind'])}</b> "
+            f"(ln Bayes factor for a heat pump {_fmt(h['log_evidence'], '.1f')}, over "
+            f"{_fmt(h['n_eff'], '.0f')} effective trips; a heat pump needs at least 3, see "
+            "<code>hybridev.bayes.heater</code>; declare it with <code>heater_kind</code> / "
+            "<code>--heater</code> if the spec sheet says).</p>")
+
+
 def _html(s: dict, images: dict[str, bytes], rejected: pd.DataFrame) -> str:
     e = html.escape
     d, sp, dg = s["data"], s["split"], s["diagnostics"]
@@ -139,6 +151,7 @@ Spearman with the absolute relative error: <code>confidence_rel</code>
 {_table(params)}
 <p class="note">A median outside its prior's 99 % range is flagged as unphysical: the
 parameter compensates for something the physics does not model. Posterior correlations:</p>
+{_heater_note(s)}
 {_table(pd.DataFrame(s.get("correlations", [])))}{img["parameters"]}
 <p class="note">Corner plot of the posterior: red lines mark the nominal values, dashed lines the
 5, 50 and 95 % quantiles.</p>{img["corner"]}
