@@ -153,6 +153,11 @@ def test_heater_kind_of_a_coastdown_vehicle(logger, tmp_path, capsys):
     assert main([*base, "--out", str(out), "--coastdown", "150", "0.3", "0.03", "1500",
                  "--heater", "heat_pump"]) == 0
     assert HybridModel.load(out)._vehicle().heater_kind == "heat_pump"
+    assert "heater learned" not in capsys.readouterr().out  # declared: nothing learned
+    auto = tmp_path / "auto"
+    assert main([*base, "--out", str(auto), "--coastdown", "150", "0.3", "0.03", "1500"]) == 0
+    assert "heater learned from the trips: " in capsys.readouterr().out
+    assert HybridModel.load(auto)._vehicle().heater_kind in ("ptc", "heat_pump")
     rng = ["range", "--soc", "0.8", "--speed", "50", "--temp", "-5", "--model", str(out)]
     assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500", "--heater", "ptc"]) == 2
     assert "heater heat_pump" in capsys.readouterr().err

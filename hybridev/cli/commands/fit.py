@@ -102,6 +102,10 @@ def run(args: argparse.Namespace) -> int:
         msg += (f"; validation MAE {info['val_mae_kwh_model']:.3f} kWh "
                 f"(physics only {info['val_mae_kwh_physics']:.3f} kWh)")
     print(msg)
+    if "heater" in info:  # heater_kind="auto" (a --coastdown vehicle without --heater)
+        h = info["heater"]
+        print(f"heater learned from the trips: {h['kind']} (ln Bayes factor for a heat pump "
+              f"{h['log_evidence']:.1f}; >= 3 chooses it; --heater declares it)")
     post = getattr(model, "posterior_", None)
     if post is not None:
         d = post.diagnostics
