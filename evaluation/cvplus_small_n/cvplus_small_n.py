@@ -19,9 +19,12 @@ the library's interval into its parts, on the in-domain test trips:
   disagreement (sd over folds of their predictive means, over the CV+ half-width):
   CV+ counts that disagreement once in the out-of-fold scores and once more in the
   spread of ``mu_{-k}(x) +- r_i s_{-k}(x)``, so an unstable fit widens it;
-* ``final_centred``: the final model's mean +- the CV+ half-width of the normalised
-  out-of-fold scores times the final model's spread (cross-conformal style; no
-  finite-sample guarantee), the width the over-coverage leaves on the table.
+* ``final_centred``: the final model's mean +- the conformal quantile of the pooled
+  normalised out-of-fold scores times the final model's spread (cross-conformal
+  style; no finite-sample guarantee), the width the over-coverage leaves on the table;
+* whether the out-of-fold scores are pessimistic: their 90 % quantile against that
+  of the fold models' scores on the new trips, and the scores of training trips at
+  the edge of their fold's fitting range against the others.
 
 Writes ``cvplus_small_n.md`` and ``.json`` to ``--out`` (default: this folder).
 Uses private methods of ``HybridModel`` (``_distributions``, ``_cv_nets``), which
@@ -50,7 +53,20 @@ LEVEL = 0.9
 SIZES = (20, 40)
 
 
-def decompose(model: HybridModel, x, y: np.ndarray, seed: int) -> dict:
+def _edge(train, fold: np.ndarray) -> np.ndarray:
+    """Whether each training trip lies outside its fold's fitting range (distance, speed,
+    temperature), i.e. its out-of-fold score is an extrapolation."""
+    cols = ("distance_km", "avg_speed_kmh", "temperature_c")
+    z = train.loc[:, list(cols)].to_numpy(float)
+    out = np.zeros(len(z), dtype=bool)
+    for k in np.unique(fold):
+        rest = z[fold != k]
+        i = fold == k
+        out[i] = np.any((z[i] < rest.min(axis=0)) | (z[i] > rest.max(axis=0)), axis=1)
+    return out
+
+
+def decompose(model: HybridModel, x, y: np.ndarray, seed: int, train) -> dict:
     out = model.predict_interval(x, LEVEL, seed=seed)
     ok = out["in_domain"].to_numpy(bool)
     cv = model._cv_nets()
@@ -70,6 +86,9 @@ def decompose(model: HybridModel, x, y: np.ndarray, seed: int) -> dict:
     def width(a, b):
         return float(np.mean((b[ok] - a[ok]) / y[ok]))
 
+    r = np.abs(cp.residuals)
+    edge = _edge(train, cp.fold)
+    test_scores = np.abs(y[None, ok] - fm[:, ok]) / fs[:, ok]  # each fold model on new trips
     lib_lo, lib_hi = out["energy_kwh_lo"].to_numpy(float), out["energy_kwh_hi"].to_numpy(float)
     return {"n_in": int(ok.sum()),
             "library": {"coverage": cov(lib_lo, lib_hi), "rel_width": width(lib_lo, lib_hi)},
@@ -77,7 +96,12 @@ def decompose(model: HybridModel, x, y: np.ndarray, seed: int) -> dict:
             "final_centred": {"coverage": cov(mu - q * sd, mu + q * sd),
                               "rel_width": width(mu - q * sd, mu + q * sd)},
             "fold_spread_share": float(np.median(fm.std(axis=0)[ok] / half[ok])),
-            "final_in_fold_hull": float(np.mean((mu >= fm.min(0)) & (mu <= fm.max(0))))}
+            "final_in_fold_hull": float(np.mean((mu >= fm.min(0)) & (mu <= fm.max(0)))),
+            "score_q90_out_of_fold": float(np.quantile(r, LEVEL)),
+            "score_q90_test": float(np.quantile(test_scores, LEVEL)),
+            "edge_share": float(edge.mean()),
+            "score_mean_edge": float(r[edge].mean()) if edge.any() else float("nan"),
+            "score_mean_interior": float(r[~edge].mean()) if (~edge).any() else float("nan")}
 
 
 def main(argv=None) -> int:
@@ -94,8 +118,10 @@ def main(argv=None) -> int:
         for rep in range(args.draws):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                model = HybridModel(conformal="cv+").fit(ssd.truth(size, 100 + rep), seed=rep)
-                rows.append({"n_train": size, "draw": rep, **decompose(model, x, y, rep)})
+                train = ssd.truth(size, 100 + rep)
+                model = HybridModel(conformal="cv+").fit(train, seed=rep)
+                rows.append({"n_train": size, "draw": rep,
+                             **decompose(model, x, y, rep, train.reset_index(drop=True))})
             print(rows[-1], flush=True)
     res = {"rows": rows, "runtime_s": round(time.perf_counter() - t0, 1)}
     args.out.mkdir(parents=True, exist_ok=True)
@@ -122,6 +148,19 @@ def main(argv=None) -> int:
         sel = [r for r in rows if r["n_train"] == size]
         lines.append(f"| {size} | {ms([r['fold_spread_share'] for r in sel])} | "
                      f"{ms([r['final_in_fold_hull'] for r in sel])} |")
+    lines += ["", "Normalised scores |y - mu_k| / s_k: 90 % quantile of the out-of-fold scores "
+              "(what CV+ calibrates with) against that of the fold models on the new test "
+              "trips; training trips outside their fold's fitting range (distance, speed or "
+              "temperature: the fold model extrapolates) and their mean score.", "",
+              "| n_train | q90 out-of-fold | q90 test | share of training trips at the edge "
+              "| mean score edge / interior |", "|---|---|---|---|---|"]
+    for size in SIZES:
+        sel = [r for r in rows if r["n_train"] == size]
+        lines.append(f"| {size} | {ms([r['score_q90_out_of_fold'] for r in sel])} | "
+                     f"{ms([r['score_q90_test'] for r in sel])} | "
+                     f"{ms([r['edge_share'] for r in sel])} | "
+                     f"{np.nanmean([r['score_mean_edge'] for r in sel]):.2f} / "
+                     f"{np.nanmean([r['score_mean_interior'] for r in sel]):.2f} |")
     with atomic_path(args.out / "cvplus_small_n.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out / 'cvplus_small_n.md'} in {res['runtime_s']} s")
