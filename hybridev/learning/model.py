@@ -51,7 +51,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
-from hybridev.bayes.heater import select_heater_kind
+from hybridev.bayes.heater import HeaterSelection, select_heater_kind
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
@@ -311,7 +311,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             self._resolved_vehicle = cached
         return cached[2]
 
-    def _select_heater(self, good: pd.DataFrame, traces, codes: np.ndarray) -> None:
+    def _select_heater(self, good: pd.DataFrame, traces,
+                       codes: np.ndarray) -> HeaterSelection | None:
         """Resolve ``heater_kind="auto"`` from the trips (:mod:`hybridev.bayes.heater`)."""
         self.heater_kind_ = None
         v = self._vehicle()
