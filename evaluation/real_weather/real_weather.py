@@ -147,7 +147,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
     keep = np.abs(feats).sum(axis=1) > 0
     xs = _summary_x(trips, extra)
     folds = np.full(len(y), -1)
-    posts, no_prior, weights, heaters = [], [], [], []
+    posts, no_prior, weights, heaters, evidence = [], [], [], [], []
     for k, (tr, te) in enumerate(GroupKFold(n_splits=N_FOLDS).split(
             xs, groups=trips["date"].to_numpy())):
         folds[te] = k
@@ -164,6 +164,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         pred["physics_discrepancy"][te] = out["energy_kwh_physics"]
         weights.append(model.discrepancy_.weights.tolist())
         heaters.append(model.heater_kind_)
+        evidence.append(model.fit_info_.get("heater", {}).get("log_evidence"))
         f_k = feats  # NNLS on the terms of the heater the fold's model learned
         if model.heater_kind_ == "heat_pump" and vehicle.heater_kind != "heat_pump":
             f_k = trip_stats(trips, dataclasses.replace(vehicle, heater_kind=model.heater_kind_),
@@ -178,7 +179,8 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         kwh_km = np.median(y[tr] / trips["distance_km"].to_numpy(float)[tr])
         pred["median_kwh_per_km"][te] = kwh_km * trips["distance_km"].to_numpy(float)[te]
     return {"pred": pred, "folds": folds, "posteriors": posts, "y": y, "no_prior": no_prior,
-            "term_weights": weights, "heater_by_fold": heaters}
+            "term_weights": weights, "heater_by_fold": heaters,
+            "heater_log_evidence_by_fold": evidence}
 
 
 def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) -> dict:
@@ -247,6 +249,7 @@ def main(argv=None) -> int:
         "no_prior_fits_by_fold": cv["no_prior"],
         "discrepancy_term_weights_by_fold": cv["term_weights"],
         "heater_kind_by_fold": cv["heater_by_fold"],
+        "heater_log_evidence_by_fold": cv["heater_log_evidence_by_fold"],
         "published_curve": rw_curves.curve_table(),
         "curve_diagnosis": rw_curves.diagnosis_minus15(),
         "tolerance": rw_curves.TOLERANCE,

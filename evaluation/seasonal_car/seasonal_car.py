@@ -151,6 +151,7 @@ def both_seasons(vehicle, m, extra, *, heat_pump: bool = False) -> dict:
                                            for s in ("summer", "winter")}}
     return {"scores": sc, "intervals": ints, "hybrid_heat_pump_declared": declared,
             "heater_kind_by_fold": cv["heater_by_fold"],
+            "heater_log_evidence_by_fold": cv["heater_log_evidence_by_fold"],
             "posteriors_inside_prior_99": [
         bool(p.prior_check()["inside"].all()) for p in cv["posteriors"]],
         "prior_check": [p.prior_check().round(4).reset_index().to_dict("records")
@@ -222,8 +223,11 @@ def write(out_dir: Path, result: dict) -> None:
             lines.append(f"| {s} | {i['n']} | {i['coverage']:.3f} | {i['rel_width']:.3f} | "
                          f"{i['share_flagged']:.3f} |")
         heaters = r["both_seasons"]["heater_kind_by_fold"]
+        ev = r["both_seasons"]["heater_log_evidence_by_fold"]
         lines += ["", f"Heater kind learned by `HybridModel` (`heater_kind=\"auto\"`) in the "
-                  f"{len(heaters)} folds: {', '.join(heaters)} (the truth: "
+                  f"{len(heaters)} folds: "
+                  f"{', '.join(f'{h} (ln B {e:+.1f})' for h, e in zip(heaters, ev, strict=True))}"
+                  " (the truth: "
                   f"{'heat pump' if r['car']['heat_pump'] else 'PTC'}); the `nnls_stats` "
                   "baseline uses the same fold's heater terms."]
         inside = r["both_seasons"]["posteriors_inside_prior_99"]
