@@ -148,6 +148,8 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
     xs = _summary_x(trips, extra)
     folds = np.full(len(y), -1)
     posts, no_prior, weights, heaters, evidence = [], [], [], [], []
+    base = "ptc" if vehicle.heater_kind == "auto" else vehicle.heater_kind  # as evaluated
+    feats_by_kind = {base: feats}
     for k, (tr, te) in enumerate(GroupKFold(n_splits=N_FOLDS).split(
             xs, groups=trips["date"].to_numpy())):
         folds[te] = k
@@ -165,10 +167,11 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
         weights.append(model.discrepancy_.weights.tolist())
         heaters.append(model.heater_kind_)
         evidence.append(model.fit_info_.get("heater", {}).get("log_evidence"))
-        f_k = feats  # NNLS on the terms of the heater the fold's model learned
-        if model.heater_kind_ == "heat_pump" and vehicle.heater_kind != "heat_pump":
-            f_k = trip_stats(trips, dataclasses.replace(vehicle, heater_kind=model.heater_kind_),
-                             traces=m.traces).features()
+        kind = model.heater_kind_ or base  # NNLS on the terms of the learned heater
+        if kind not in feats_by_kind:
+            feats_by_kind[kind] = trip_stats(trips, dataclasses.replace(
+                vehicle, heater_kind=kind), traces=m.traces).features()
+        f_k = feats_by_kind[kind]
         w, _ = nnls(f_k[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
         pred["nnls_stats"][te] = f_k[keep][:, te].T @ w
         free = _fit_no_prior(stats, y, tr)
