@@ -114,11 +114,16 @@ def domain_quantities(table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.
         if has_trace.any() and "grade_pct" not in table.columns:
             g = 100.0 * np.tan(traces.per_trip_mean(traces.grade_rad))
             grade[has_trace] = g[pos[has_trace]]
-    q = np.column_stack([table["temperature_c"].to_numpy(float), v,
-                         np.log(np.maximum(d, 1e-3)),
-                         np.log(np.maximum(d, 1e-3) / np.maximum(v, 1e-3)),
-                         np.nan_to_num(grade)])
-    return q, has_trace
+    return _quantities(table["temperature_c"].to_numpy(float), v, d, grade), has_trace
+
+
+def _quantities(temperature_c: np.ndarray, avg_speed_kmh: np.ndarray, distance_km: np.ndarray,
+                grade_pct: np.ndarray) -> np.ndarray:
+    """:func:`domain_quantities`' matrix (n_trips, 5) from the trips' arrays."""
+    d, v = distance_km, avg_speed_kmh
+    return np.column_stack([temperature_c, v, np.log(np.maximum(d, 1e-3)),
+                            np.log(np.maximum(d, 1e-3) / np.maximum(v, 1e-3)),
+                            np.nan_to_num(grade_pct)])
 
 
 @dataclass(frozen=True)
@@ -166,7 +171,10 @@ class TrainingDomain:
 
     def gaps(self, table: pd.DataFrame, traces=None) -> np.ndarray:
         """Distance to the nearest training value over the tolerance, (n_trips, 5)."""
-        q, _ = domain_quantities(table, traces)
+        return self._gaps(domain_quantities(table, traces)[0])
+
+    def _gaps(self, q: np.ndarray) -> np.ndarray:
+        """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5)."""
         out = np.empty_like(q)
         for j, (vals, tol) in enumerate(zip(self.values, DOMAIN_TOLERANCES, strict=True)):
             i = np.searchsorted(vals, q[:, j])
@@ -197,6 +205,26 @@ class TrainingDomain:
         """
         s = self.gaps(table, traces).max(axis=1) if len(table) else np.zeros(0)
         s = np.where(self.missing_inputs(table, traces), np.maximum(s, MISSING_INPUT_SCORE), s)
+        return s, s <= 1.0
+
+    def _score_columns(self, columns, n_trips: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`score` without logged traces, of a table given as arrays by column name.
+
+        ``columns`` holds ``distance_km``, ``avg_speed_kmh``, ``temperature_c``
+        (float), optionally ``grade_pct`` (float) and ``mode`` (object, ``None``
+        where unknown), for ``n_trips`` trips.
+        """
+        n = int(n_trips)
+        grade = columns["grade_pct"] if "grade_pct" in columns else np.zeros(n)
+        q = _quantities(columns["temperature_c"], columns["avg_speed_kmh"],
+                        columns["distance_km"], grade)
+        s = self._gaps(q).max(axis=1) if n else np.zeros(0)
+        miss = np.zeros(n, dtype=bool)
+        if self.needs_mode:
+            miss |= pd.isna(columns["mode"]) if "mode" in columns else np.ones(n, dtype=bool)
+        if self.needs_trace:  # no trip has a logged trace
+            miss |= np.ones(n, dtype=bool)
+        s = np.where(miss, np.maximum(s, MISSING_INPUT_SCORE), s)
         return s, s <= 1.0
 
     def clip_features(self, x: np.ndarray) -> np.ndarray:

@@ -25,7 +25,8 @@ when every trip lacks it) gets standard deviation 1, so it maps to 0.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -212,21 +213,57 @@ def trip_features(table: pd.DataFrame, features: Sequence[str] = FEATURE_NAMES) 
     """
     names = check_feature_names(features)
     n = len(table)
+    cols: dict[str, np.ndarray] = {}
+    for name in names:  # each column looked up once, in order (the first missing one raises)
+        if name.startswith("mode_"):
+            if "mode" not in cols and "mode" in table.columns:
+                cols["mode"] = normalize_modes(table["mode"].to_numpy(object))
+        elif name in table.columns:
+            cols[name] = table[name].to_numpy(dtype=float)
+        elif name != "hour":
+            _missing_feature(name)
+    return _feature_matrix(cols, n, names)
+
+
+def _missing_feature(name: str) -> NoReturn:
+    raise ValueError(f"feature {name!r} needs column {name!r}, which the table lacks; "
+                     "run hybridev.simulate first for the physics columns")
+
+
+def _feature_matrix(columns: Mapping[str, np.ndarray], n_trips: int,
+                    features: Sequence[str] = FEATURE_NAMES) -> np.ndarray:
+    """:func:`trip_features` from the table's columns as arrays.
+
+    Parameters
+    ----------
+    columns : mapping of str to numpy.ndarray (n_trips,)
+        Column values by name: float ones, and ``mode`` as object (``None``
+        where unknown); ``mode`` and ``hour`` may be missing.
+    n_trips : int
+    features : sequence of str
+        A subset of :data:`FEATURE_NAMES` (canonical order is used).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_trips, n_features), float64
+        As :func:`trip_features` on a table with those columns.
+    """
+    names = check_feature_names(features)
+    n = int(n_trips)
     out = np.empty((n, len(names)))
     onehot = None
     for j, name in enumerate(names):
         if name.startswith("mode_"):
             if onehot is None:
-                onehot = mode_one_hot(table["mode"].to_numpy(object) if "mode" in table.columns
+                onehot = mode_one_hot(columns["mode"] if "mode" in columns
                                       else np.full(n, None, dtype=object))
             out[:, j] = onehot[:, MODE_NAMES.index(name[len("mode_"):])]
-        elif name == "hour" and "hour" not in table.columns:
+        elif name == "hour" and "hour" not in columns:
             out[:, j] = DEFAULT_HOUR
         else:
-            if name not in table.columns:
-                raise ValueError(f"feature {name!r} needs column {name!r}, which the table lacks; "
-                                 "run hybridev.simulate first for the physics columns")
-            out[:, j] = table[name].to_numpy(dtype=float)
+            if name not in columns:
+                _missing_feature(name)
+            out[:, j] = columns[name]
     if not np.all(np.isfinite(out)):
         j = int(np.flatnonzero(~np.isfinite(out).all(axis=0))[0])
         raise ValueError(f"feature {names[j]!r} has NaN or infinite values")

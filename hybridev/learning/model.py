@@ -27,7 +27,7 @@ Conventions beyond the paper (documented deviations):
   energy and warns (:class:`PhysicsFallbackWarning`), as the paper's
   "defaults to the validated physics model".
 
-Module size (about 690 lines, over the package's 400-line guide): this is the
+Module size (about 790 lines, over the package's 400-line guide): this is the
 one estimator class, with the hooks of the CV+, domain and dask layers. Its pieces with a job of their own already live beside it
 (persistence in :mod:`hybridev.learning.persist`, the probabilistic methods in
 :mod:`hybridev.learning.uncertainty`, features, networks, conformal); what is
@@ -63,6 +63,7 @@ from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
 from hybridev.learning.domain import TrainingDomain, warn_out_of_domain
 from hybridev.learning.features import (
     FEATURE_NAMES,
+    _feature_matrix,
     check_feature_names,
     fit_standardizer,
     normalize_modes,
@@ -73,7 +74,7 @@ from hybridev.learning.inputs import _check_range, unpack_trips, validate_predic
 from hybridev.learning.mondrian import mondrian_bins
 from hybridev.learning.nn import train_ensemble
 from hybridev.learning.persist import load_model, save_model
-from hybridev.learning.physical import energy_floor_kwh, held_feature_table
+from hybridev.learning.physical import _floor_of_columns, _held_columns
 from hybridev.learning.predictive import soc_from_energy
 from hybridev.learning.refit import RefitGuardMixin
 from hybridev.learning.splits import group_codes, group_holdout
@@ -82,7 +83,7 @@ from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
 from hybridev.physics.stats_build import trip_stats
 from hybridev.physics.traces import LoggedTraces
-from hybridev.physics.trips import append_columns, simulate, with_physics_columns
+from hybridev.physics.trips import _simulate_columns, append_columns, with_physics_columns
 
 __all__ = [
     "CONFORMAL_MODES",
@@ -405,23 +406,49 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         Returns simulate-like columns with ``mode`` normalised (``None``
         where unknown).
         """
+        table, _, physics = self._physics_columns(trips, traces)
+        return append_columns(table, physics) if physics else table
+
+    def _physics_columns(self, trips: pd.DataFrame, traces: LoggedTraces | None = None
+                         ) -> tuple[pd.DataFrame, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """:meth:`_physics` in parts, with the columns the predictions need as arrays.
+
+        Returns
+        -------
+        table : pandas.DataFrame
+            The validated trips (``mode`` normalised); with the physics columns
+            unless ``physics`` holds them.
+        columns : dict of str to numpy.ndarray
+            The columns of :meth:`_physics`' table that :meth:`predict` reads
+            (:data:`_ARRAY_COLUMNS` present in the table as float, ``mode`` as
+            object, the physics columns), each looked up once: column access is
+            slow on small tables.
+        physics : dict of str to numpy.ndarray
+            The physics columns still to append to ``table`` (empty when
+            ``table`` has them); :meth:`_physics` is ``table`` with them.
+        """
         if not isinstance(trips, pd.DataFrame):
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if getattr(self, "posterior_", None) is not None:
-            return self._posterior_physics(self._validated(trips), 0, 0, traces)[0]
+            out = self._posterior_physics(self._validated(trips), 0, 0, traces)[0]
+            return out, _table_columns(out), {}
         if traces is not None:
             t = self._validated(trips)
             mm = self.missing_mode if self.missing_mode not in ("infer", "marginalize") \
                 else "normal"
             st = trip_stats(t, self._vehicle(), traces=traces, n_steps=int(self.n_steps),
                             seed=int(self.physics_seed), missing_mode=mm)
-            return with_physics_columns(t, energy_from_stats(st), st.max_speed_kmh,
-                                  self._vehicle().battery_capacity_kwh)
+            out = with_physics_columns(t, energy_from_stats(st), st.max_speed_kmh,
+                                       self._vehicle().battery_capacity_kwh)
+            return out, _table_columns(out), {}
         modes = normalize_modes(trips.get("mode"), len(trips))
-        out = simulate(trips.assign(mode=physics_modes(modes)), self._vehicle(),
-                       n_steps=int(self.n_steps), seed=int(self.physics_seed))
-        out["mode"] = modes  # simulate raises on any bad row, so rows are unchanged
-        return out
+        t, cols, physics = _simulate_columns(trips.assign(mode=physics_modes(modes)),
+                                             self._vehicle(), n_steps=int(self.n_steps),
+                                             seed=int(self.physics_seed))
+        if pd.isna(modes).any():  # else the physics modes are these: same values and dtype
+            t["mode"] = modes  # simulate raises on any bad row, so rows are unchanged
+        cols["mode"] = modes
+        return t, {**cols, **physics}, physics
 
     def _target_scale(self, energy_physics_kwh, distance_km) -> np.ndarray:
         """Scale of the network target: 1 (absolute) or ``max(|E_p|, 0.05 d)`` kWh."""
@@ -438,7 +465,10 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
 
     def _features(self, physics_table: pd.DataFrame) -> np.ndarray:
         """Standardised network inputs (n_trips, n_features), float32."""
-        x = trip_features(physics_table, self.feature_names_)
+        return self._standardized(trip_features(physics_table, self.feature_names_))
+
+    def _standardized(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`_features` of the raw feature matrix ``x`` (n_trips, n_features)."""
         xs = ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
         dom = getattr(self, "domain_", None)  # no extrapolation: inputs held in their range
         return xs if dom is None else dom.clip_features(xs)
@@ -686,26 +716,31 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             self._require_fitted()
         self._check_params()
         trips, traces = unpack_trips(trips, timeseries)
-        out = self._physics(trips, traces)  # validates the trips
-        e_phys = out["energy_kwh_physics"].to_numpy(float)
+        # The table's columns as arrays, each looked up once (slow on small tables); the
+        # physics columns are appended with the predictions, in one step.
+        table, arr, cols = self._physics_columns(trips, traces)  # validates the trips
+        n = len(table)
+        e_phys = arr["energy_kwh_physics"]
         if hasattr(self, "net_"):
-            held, factor = held_feature_table(self, out)  # learning.physical
-            scale = self._target_scale(e_phys, out["distance_km"].to_numpy(float)) * factor
-            energy = self._combine(e_phys,
-                                   self._residual_moments(self._features(held), scale)[0].mean(0))
-            energy = np.maximum(energy, energy_floor_kwh(out, self._vehicle()))
+            held, factor = _held_columns(self, arr)  # learning.physical
+            scale = self._target_scale(e_phys, arr["distance_km"]) * factor
+            x = self._standardized(_feature_matrix(held, n, self.feature_names_))
+            energy = self._combine(e_phys, self._residual_moments(x, scale)[0].mean(0))
+            energy = np.maximum(energy, _floor_of_columns(arr, self._vehicle()))
         else:
             warnings.warn(f"{type(self).__name__} is not fitted: energy_kwh_pred is the physics "
                           "prediction only (energy_kwh_physics); fit it on measured trips to "
                           "add the learned residual", PhysicsFallbackWarning, stacklevel=2)
             energy = e_phys
-        cols = {"energy_kwh_pred": energy,
-                "soc_final_pred": soc_from_energy(out["soc_initial"].to_numpy(float), energy,
+        cols = {**cols, "energy_kwh_pred": energy,
+                "soc_final_pred": soc_from_energy(arr["soc_initial"], energy,
                                                   self._vehicle().battery_capacity_kwh)}
         if getattr(self, "domain_", None) is not None:  # in_domain, domain_score; warns
-            cols["domain_score"], cols["in_domain"] = self.domain_.score(out, traces)
-            warn_out_of_domain(int((~cols["in_domain"]).sum()), len(out))
-        return append_columns(out, cols)  # one step: column inserts are slow on one trip
+            cols["domain_score"], cols["in_domain"] = (
+                self.domain_.score(table, traces) if traces is not None
+                else self.domain_._score_columns(arr, n))
+            warn_out_of_domain(int((~cols["in_domain"]).sum()), n)
+        return append_columns(table, cols)  # one step: column inserts are slow on one trip
 
     # -- persistence ----------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
@@ -738,3 +773,17 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             format or major version, wrong feature names or shapes).
         """
         return load_model(cls, path)
+
+
+_ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",
+                  "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics")
+"""Float columns of a physics table that :meth:`HybridModel.predict` reads."""
+
+
+def _table_columns(table: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The :data:`_ARRAY_COLUMNS` of ``table`` present (float) and ``mode`` (object)."""
+    present = set(table.columns)
+    cols = {c: table[c].to_numpy(float) for c in _ARRAY_COLUMNS if c in present}
+    if "mode" in present:
+        cols["mode"] = table["mode"].to_numpy(object)
+    return cols

@@ -97,9 +97,22 @@ def energy_floor_kwh(trips: pd.DataFrame, vehicle: VehicleParams) -> np.ndarray:
         with ideal recovery (then the ideal energy divided by the margin).
     """
     grade = trips["grade_pct"].fillna(0.0).to_numpy(float) if "grade_pct" in trips else 0.0
-    flat, gr = floor_per_km(trips["avg_speed_kmh"].to_numpy(float), vehicle, grade)
-    return _floor(trips["distance_km"].to_numpy(float), flat, gr, vehicle.mass_kg,
-                  vehicle.gravity_mps2)
+    return _energy_floor(trips["distance_km"].to_numpy(float),
+                         trips["avg_speed_kmh"].to_numpy(float), grade, vehicle)
+
+
+def _energy_floor(distance_km: np.ndarray, avg_speed_kmh: np.ndarray, grade_pct,
+                  vehicle: VehicleParams) -> np.ndarray:
+    """:func:`energy_floor_kwh` from the columns as arrays (``grade_pct`` without NaN)."""
+    flat, gr = floor_per_km(avg_speed_kmh, vehicle, grade_pct)
+    return _floor(distance_km, flat, gr, vehicle.mass_kg, vehicle.gravity_mps2)
+
+
+def _floor_of_columns(columns, vehicle: VehicleParams) -> np.ndarray:
+    """:func:`energy_floor_kwh` of a table given as arrays by column name (float)."""
+    grade = columns.get("grade_pct")
+    grade = 0.0 if grade is None else np.where(np.isnan(grade), 0.0, grade)  # as fillna(0)
+    return _energy_floor(columns["distance_km"], columns["avg_speed_kmh"], grade, vehicle)
 
 
 def floor_along(distance_km: np.ndarray, flat_n: np.ndarray, grade_n: np.ndarray,
@@ -132,13 +145,33 @@ def held_feature_table(model, table: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     the relative target, whose scale already grows with the trip.
     """
     d = table["distance_km"].to_numpy(float)
-    held = distance_hold(model, d)
-    ratio = np.divide(held, d, out=np.ones_like(d), where=d > 0)
-    if np.all(ratio == 1.0):
+    held, ratio = _held_ratio(model, d)
+    if ratio is None:
         return table, np.ones_like(d)
     out = table.copy()
     out["distance_km"] = held
     if "energy_kwh_physics" in out.columns:
         out["energy_kwh_physics"] = out["energy_kwh_physics"].to_numpy(float) * ratio
+    relative = model.residual_target == "relative" and model._residual
+    return out, (np.ones_like(d) if relative else 1.0 / ratio)
+
+
+def _held_ratio(model, d: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Held distances and ``d_held / d`` (None when no trip is held)."""
+    held = distance_hold(model, d)
+    ratio = np.divide(held, d, out=np.ones_like(d), where=d > 0)
+    return held, (None if np.all(ratio == 1.0) else ratio)
+
+
+def _held_columns(model, columns: dict[str, np.ndarray]
+                  ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """:func:`held_feature_table` of a table given as arrays by column name (float)."""
+    d = columns["distance_km"]
+    held, ratio = _held_ratio(model, d)
+    if ratio is None:
+        return columns, np.ones_like(d)
+    out = {**columns, "distance_km": held}
+    if "energy_kwh_physics" in out:
+        out["energy_kwh_physics"] = out["energy_kwh_physics"] * ratio
     relative = model.residual_target == "relative" and model._residual
     return out, (np.ones_like(d) if relative else 1.0 / ratio)

@@ -40,7 +40,7 @@ from hybridev.physics.forces import (
 from hybridev.physics.kinematics import _check_steps, profile_table, synthesize_speed_trace
 from hybridev.physics.params import PROFILES, VehicleParams
 from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
-from hybridev.physics.validation import validate_trips
+from hybridev.physics.validation import _validated_trip_columns, validate_trips
 
 __all__ = ["BLOCK_TRIPS", "TripTraces", "make_trips", "simulate", "trip_traces",
            "with_physics_columns"]
@@ -115,15 +115,31 @@ def _check_seed(seed) -> int:
 def _blocks(trips: pd.DataFrame, n_steps: int, seed: int
             ) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray | float]]:
     n_steps, seed = _check_steps(n_steps), _check_seed(seed)
-    d = trips["distance_km"].to_numpy(float)
-    s = trips["avg_speed_kmh"].to_numpy(float)
-    modes = trips["mode"].to_numpy(object)
-    grade = (np.arctan(trips["grade_pct"].to_numpy(float) / 100.0)
-             if "grade_pct" in trips.columns else None)
-    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns
-            else np.arange(len(trips)))
+    cols = {"distance_km": trips["distance_km"].to_numpy(float),
+            "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float),
+            "mode": trips["mode"].to_numpy(object)}
+    if "grade_pct" in trips.columns:
+        cols["grade_pct"] = trips["grade_pct"].to_numpy(float)
+    if "trip_id" in trips.columns:
+        cols["trip_id"] = trips["trip_id"].to_numpy()
+    return _column_blocks(cols, len(trips), n_steps, seed)
+
+
+def _column_blocks(cols: dict[str, np.ndarray], n: int, n_steps: int, seed: int
+                   ) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray | float]]:
+    """Blocks of speed traces of ``n`` trips given as arrays by column name.
+
+    ``cols`` holds ``distance_km``, ``avg_speed_kmh`` (float), ``mode`` (object)
+    and optionally ``grade_pct`` (float) and ``trip_id``; ``n_steps`` and
+    ``seed`` are checked. Yields ``(rows, speed, dt, grade)`` as :func:`_blocks`.
+    """
+    d = cols["distance_km"]
+    s = cols["avg_speed_kmh"]
+    modes = cols["mode"]
+    grade = np.arctan(cols["grade_pct"] / 100.0) if "grade_pct" in cols else None
+    keys = cols["trip_id"] if "trip_id" in cols else np.arange(n)
     step = max(1, min(BLOCK_TRIPS, _BLOCK_SAMPLES // (int(n_steps) + 1)))
-    for start in range(0, len(trips), step):
+    for start in range(0, n, step):
         sl = slice(start, start + step)
         v, dt = synthesize_speed_trace(d[sl], s[sl], modes[sl], n_steps=n_steps, seed=seed,
                                        trip_keys=keys[sl])
@@ -168,21 +184,45 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
     >>> bool(((out.soc_final_physics >= 0) & (out.soc_final_physics <= 1)).all())
     True
     """
+    t, _, phys = _simulate_columns(trips, vehicle, n_steps=n_steps, seed=seed,
+                                   progress=progress)
+    return append_columns(t, phys)
+
+
+def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
+                      n_steps: int = 1000, seed: int = 0,
+                      progress: Callable[[int], None] | None = None
+                      ) -> tuple[pd.DataFrame, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`simulate` before its columns are appended.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        The validated trips (:func:`hybridev.validate_trips`).
+    columns : dict of str to numpy.ndarray
+        The table's checked columns as arrays (numeric ones as float, ``mode``
+        as object) and ``trip_id`` when present, so that callers need not
+        look them up again (column access is slow on small tables).
+    physics : dict of str to numpy.ndarray
+        :func:`simulate`'s four physics columns, shape (n_trips,) each.
+    """
     n_steps, seed = _check_steps(n_steps), _check_seed(seed)
-    t = validate_trips(trips)
+    t, cols = _validated_trip_columns(trips)
+    if "trip_id" in t.columns:
+        cols["trip_id"] = t["trip_id"].to_numpy()
     veh = vehicle or VehicleParams()
     n = len(t)
     energy = np.empty(n)
     vmax = np.empty(n)
-    prof = profile_table(t["mode"].to_numpy(object), n,
+    prof = profile_table(cols["mode"], n,
                          ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
-    temp = t["temperature_c"].to_numpy(float)
+    temp = cols["temperature_c"]
     trac, regen = cold_factors(temp, veh)
     mult_eta = (prof["efficiency_multiplier"] * trac / veh.drivetrain_efficiency)[:, None]
     eta_r = (prof["regen_efficiency"] * regen)[:, None]
     aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
     warm = veh.climate_model == "continuous"
-    for sl, v, dt, grade in _blocks(t, n_steps, seed):
+    for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
         energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
@@ -193,7 +233,8 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
         vmax[sl] = v.max(axis=1) * 3.6
         if progress is not None:
             progress(min(sl.stop, n))
-    return with_physics_columns(t, energy, vmax, veh.battery_capacity_kwh)
+    return t, cols, _physics_columns(energy, vmax, veh.battery_capacity_kwh,
+                                    cols["soc_initial"], cols["distance_km"])
 
 
 def with_physics_columns(trips: pd.DataFrame, energy_kwh, max_speed_kmh,
@@ -214,13 +255,34 @@ def with_physics_columns(trips: pd.DataFrame, energy_kwh, max_speed_kmh,
         With ``energy_kwh_physics``, ``soc_final_physics`` (``s0 - E/C``
         clipped to [0, 1]), ``max_speed_kmh`` and ``kwh_per_km_physics``.
     """
+    return append_columns(trips, _physics_columns(
+        energy_kwh, max_speed_kmh, capacity_kwh, trips["soc_initial"].to_numpy(float),
+        trips["distance_km"].to_numpy(float)))
+
+
+def _physics_columns(energy_kwh, max_speed_kmh, capacity_kwh: float, soc_initial: np.ndarray,
+                    distance_km: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`with_physics_columns`'s four columns, from the trips' arrays.
+
+    Parameters
+    ----------
+    energy_kwh : array_like, shape (n_trips,), kWh
+    max_speed_kmh : array_like, shape (n_trips,), km/h
+    capacity_kwh : float, kWh
+    soc_initial : numpy.ndarray, shape (n_trips,)
+    distance_km : numpy.ndarray, shape (n_trips,), km
+
+    Returns
+    -------
+    dict of str to array
+        ``energy_kwh_physics``, ``soc_final_physics``, ``max_speed_kmh`` and
+        ``kwh_per_km_physics``, in that order.
+    """
     energy = np.asarray(energy_kwh, dtype=float)
-    cols = {"energy_kwh_physics": energy,
-            "soc_final_physics": np.clip(trips["soc_initial"].to_numpy(float)
-                                         - energy / capacity_kwh, 0.0, 1.0),
+    return {"energy_kwh_physics": energy,
+            "soc_final_physics": np.clip(soc_initial - energy / capacity_kwh, 0.0, 1.0),
             "max_speed_kmh": max_speed_kmh,
-            "kwh_per_km_physics": energy / trips["distance_km"].to_numpy(float)}
-    return append_columns(trips, cols)
+            "kwh_per_km_physics": energy / distance_km}
 
 
 def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.DataFrame:

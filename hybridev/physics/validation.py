@@ -105,6 +105,22 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
         Columns ``row`` (original index), ``field``, ``value``, ``reason``.
         Empty in ``"raise"`` mode.
     """
+    good, rejected, _ = _check_table(table, required=required, rules=rules, modes=modes,
+                                     mode_required=mode_required, on_error=on_error, what=what)
+    return good, rejected
+
+
+def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[str, FieldRule],
+                 modes: tuple[str, ...] | None = None, mode_required: bool = True,
+                 on_error: str = "raise", what: str = "trips"
+                 ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, np.ndarray]]:
+    """:func:`check_table`, plus the checked columns as arrays.
+
+    The third item maps each checked numeric column to its float values and
+    ``"mode"`` (when present) to its cells (object), for every row of
+    ``table``: in ``"raise"`` mode these are the columns of ``good``, so
+    callers need not look the columns up again (slow on small tables).
+    """
     if on_error not in ("raise", "collect"):
         raise ValueError(f"on_error={on_error!r}; allowed: 'raise', 'collect'")
     if not isinstance(table, pd.DataFrame):
@@ -143,6 +159,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
         bad_any |= mask
 
     conv = {}
+    arrays: dict[str, np.ndarray] = {}
     for field, rule in rules.items():
         if field not in out.columns:
             continue
@@ -152,12 +169,14 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
                rule.describe())
         if raw.dtype != np.float64:  # float64 columns are kept as they are
             conv[field] = x
+        arrays[field] = x
     # One (lazy, copy-on-write) copy with every numeric column as float: column
     # replacements are slow on small tables, so only the converted ones are set.
     out = table.assign(**conv) if conv else table.copy(deep=False)
     if "mode" in out.columns:
         m = out["mode"]
         cells = m.to_numpy(dtype=object)
+        arrays["mode"] = cells
         known = np.zeros(len(cells), dtype=bool)
         for name in modes:  # the common case: every mode is a known one
             known |= cells == name
@@ -173,7 +192,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
     if on_error == "collect" and len(good) == 0:
         raise ValueError(f"{what}: all {len(out)} rows were rejected; first reason: "
                          f"{rejected['reason'].iloc[0]}")
-    return good, rejected
+    return good, rejected, arrays
 
 
 def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
@@ -218,3 +237,9 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     """
     good, _ = check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
     return good
+
+
+def _validated_trip_columns(trips: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+    """:func:`validate_trips`, plus the checked columns as arrays (see :func:`_check_table`)."""
+    good, _, arrays = _check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
+    return good, arrays
