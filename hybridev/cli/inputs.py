@@ -183,11 +183,21 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
 
     mapping = column_mapping(args)
     strict = measured if strict is None else strict
-    table = apply_columns(read_table(path), mapping, what=str(path), strict=strict)
     ts_path = getattr(args, "timeseries", None)
+    # with traces, ids are matched across two files: read them as text ('007' stays '007')
+    ids = () if ts_path is None else tuple({"trip_id", *(o for o, n in mapping.items()
+                                                          if n == "trip_id")})
+    raw = read_table(path, text_columns=ids)
     ts = None
     if ts_path is not None:
-        ts = apply_columns(read_table(ts_path), mapping, what=str(ts_path), strict=False)
+        raw_ts = read_table(ts_path, text_columns=ids)
+        missing = [o for o in mapping if o not in raw.columns and o not in raw_ts.columns]
+        if strict and missing:
+            raise ValueError(f"--columns: neither {path} nor {ts_path} has column(s) {missing}; "
+                             f"their columns: {list(raw.columns)} and {list(raw_ts.columns)}")
+        ts = apply_columns(raw_ts, mapping, what=str(ts_path), strict=False)
+        strict = False  # checked above over both files
+    table = apply_columns(raw, mapping, what=str(path), strict=strict)
     if ts is None or "soc" not in ts.columns:  # a logged soc comes first
         table = fill_soc_initial(table, getattr(args, "soc_initial", None))
     try:
@@ -198,14 +208,20 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
             return m.trips, m.traces, m.rejected
         if ts is None:
             return table, None, None
-        from hybridev.data.logs import _derive_from_traces
+        from hybridev.data.logs import _derive_from_traces, harmonise_trip_ids, match_traces
         from hybridev.data.timeseries import validate_timeseries
 
         if "trip_id" not in table.columns:
             raise ValueError("trips need a 'trip_id' column to be matched with a time series")
+        table, ts = harmonise_trip_ids(table, ts)
         traces, rejected = validate_timeseries(ts)
+        match_traces(table, traces, warn=False)
+        if len(rejected):  # the trips stay: predicted on a synthesised trace instead
+            rejected = rejected.assign(reason=rejected["reason"].astype(str)
+                                       + "; the trip is predicted on a synthesised trace")
         table = fill_soc_initial(_derive_from_traces(table, traces),
                                  getattr(args, "soc_initial", None))
+        match_traces(table, traces, what="trips to predict")
         return table, traces, rejected
     except ValueError as exc:
         raise hint_missing_soc(exc) from exc
@@ -220,6 +236,9 @@ def report_rejected(command: str, source: str, rejected, limit: int = 10) -> Non
     print(f"hybridev {command}: rejected {len(rejected)} row(s)/trace(s) of {source}:",
           file=sys.stderr)
     for r in rejected.head(limit).itertuples():
-        print(f"  {getattr(r, 'source', 'trips')} row {r.row}: {r.reason}", file=sys.stderr)
+        row = getattr(r, "row", None)
+        where = (f"row {row}" if row is not None and not (isinstance(row, float) and row != row)
+                 else f"trip_id={getattr(r, 'trip_id', None)!r}")
+        print(f"  {getattr(r, 'source', 'trips')} {where}: {r.reason}", file=sys.stderr)
     if len(rejected) > limit:
         print(f"  ... and {len(rejected) - limit} more", file=sys.stderr)

@@ -2,7 +2,8 @@
 
 Subcommands live in :mod:`hybridev.cli.commands`. Every subcommand exits with 0 on
 success and with 2 and a one-line message (naming the field, value and allowed
-range) on bad input.
+range) on bad input. Warnings are printed as one line each,
+``hybridev <command>: <WarningClass>: <message>``, without Python file paths.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 from collections.abc import Sequence
 
 from hybridev.cli.commands import COMMAND_MODULES
@@ -35,11 +37,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hybridev`` console script; returns the exit code."""
     parser, runners = _parser()
     args = parser.parse_args(argv)
-    try:
-        return runners[args.command](args)
-    except ValueError as exc:
-        print(f"hybridev {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+
+    def show(message, category, filename, lineno, file=None, line=None):  # one line each
+        print(f"hybridev {args.command}: {category.__name__}: {message}",
+              file=sys.stderr if file is None else file)
+
+    with warnings.catch_warnings():  # restores the previous showwarning on exit
+        warnings.showwarning = show
+        try:
+            return runners[args.command](args)
+        except ValueError as exc:
+            print(f"hybridev {args.command}: error: {exc}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,7 +7,8 @@ one small module so that no layer has to import another to raise or catch them.
 
 from __future__ import annotations
 
-__all__ = ["CalibrationWarning", "ConvergenceWarning", "OutOfDomainWarning", "PhysicsFallbackWarning"]
+__all__ = ["CalibrationWarning", "ConvergenceWarning", "DataWarning", "OutOfDomainWarning",
+           "PhysicsFallbackWarning"]
 
 
 class ConvergenceWarning(UserWarning):
@@ -24,3 +25,7 @@ class OutOfDomainWarning(UserWarning):
 
 class CalibrationWarning(UserWarning):
     """The measured trips are too few (or too few groups) to calibrate the usual levels."""
+
+
+class DataWarning(UserWarning):
+    """Input is used, but with less than it could carry (e.g. a trip without its logged trace)."""

@@ -46,8 +46,13 @@ def atomic_dir(path: str | os.PathLike, *, option: str = "path", kind: str = "di
         yield tmp
 
 
-def read_table(path: str | os.PathLike, *, option: str | None = None) -> pd.DataFrame:
+def read_table(path: str | os.PathLike, *, option: str | None = None,
+               text_columns: tuple[str, ...] = ()) -> pd.DataFrame:
     """Read a CSV or Parquet table, with a clear error for a missing or unreadable file.
+
+    ``text_columns``: CSV columns read as text, not numbers (identifiers such as
+    ``trip_id``: ``007`` stays ``"007"`` and matches the same id in a Parquet file);
+    names the file lacks are ignored.
 
     Examples
     --------
@@ -65,7 +70,7 @@ def read_table(path: str | os.PathLike, *, option: str | None = None) -> pd.Data
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             return pd.read_parquet(path)
-        return pd.read_csv(path)
+        return pd.read_csv(path, dtype=dict.fromkeys(text_columns, str) or None)
     except pd.errors.EmptyDataError as exc:
         raise ValueError(f"{what} is empty (no header row)") from exc
     except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:

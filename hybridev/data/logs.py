@@ -10,11 +10,13 @@ summaries from the traces, and report every rejected row with its reason.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+from hybridev.core.errors import DataWarning
 from hybridev.core.fileio import read_table
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.timeseries import (
@@ -24,7 +26,8 @@ from hybridev.data.timeseries import (
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = ["TRACE_TOLERANCE", "MeasuredTrips", "measured_from_frames", "read_measured_trips"]
+__all__ = ["TRACE_TOLERANCE", "MeasuredTrips", "harmonise_trip_ids", "match_traces",
+           "measured_from_frames", "read_measured_trips"]
 
 TRACE_TOLERANCE = 0.10
 """Largest relative difference allowed between a trip row and its logged trace:
@@ -32,6 +35,74 @@ TRACE_TOLERANCE = 0.10
 ``avg_speed_kmh`` within 10 % (or 2 km/h) of the trace's mean speed over the
 whole logged duration or over its moving time (speed above 1 km/h). A row
 outside is rejected with both numbers in the reason."""
+
+
+def _is_number_ids(ids: pd.Series) -> bool:
+    return bool(pd.api.types.is_numeric_dtype(ids) and not pd.api.types.is_bool_dtype(ids))
+
+
+def _text_ids(ids: pd.Series) -> pd.Series:
+    """Identifiers as text: whole numbers without a decimal point (``7.0`` -> ``"7"``)."""
+    codes, uniq = pd.factorize(ids)
+    text = np.array([str(int(v)) if isinstance(v, int | np.integer | float | np.floating)
+                     and float(v).is_integer() else str(v) for v in uniq] + [None], dtype=object)
+    return pd.Series(text[codes], index=ids.index, dtype=object)
+
+
+def harmonise_trip_ids(trips: pd.DataFrame, timeseries: pd.DataFrame
+                       ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Give both tables' ``trip_id`` one type when one holds numbers and the other text.
+
+    A CSV reader turns ids such as ``1`` into numbers while a Parquet file may keep
+    them as text (or the other way round); compared as they are, no trip would
+    find its trace. When exactly one side is numeric, both become text (whole
+    numbers without a decimal point). Same-typed ids are left as they are.
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"trip_id": [1, 2]})
+    >>> ts = pd.DataFrame({"trip_id": ["1", "2"]})
+    >>> a, b = harmonise_trip_ids(t, ts)
+    >>> a.trip_id.tolist(), b.trip_id.tolist()
+    (['1', '2'], ['1', '2'])
+    """
+    if not (isinstance(trips, pd.DataFrame) and isinstance(timeseries, pd.DataFrame)
+            and "trip_id" in trips.columns and "trip_id" in timeseries.columns):
+        return trips, timeseries
+    if _is_number_ids(trips["trip_id"]) == _is_number_ids(timeseries["trip_id"]):
+        return trips, timeseries
+    return (trips.assign(trip_id=_text_ids(trips["trip_id"])),
+            timeseries.assign(trip_id=_text_ids(timeseries["trip_id"])))
+
+
+def match_traces(trips: pd.DataFrame, traces: LoggedTraces | None, *, what: str = "trips",
+                 warn: bool = True) -> None:
+    """Check that the trips and their traces share ids; warn for trips without a trace.
+
+    Raises ``ValueError`` when no trace's ``trip_id`` matches a trip row (the two
+    files use different ids: nothing could be matched). Trip rows without logged
+    samples are not rejected: their physics runs on a synthesised speed trace,
+    which a :class:`~hybridev.core.errors.DataWarning` reports with their count
+    (``warn=False``: only the check).
+    """
+    if traces is None or not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
+        return
+    tid = trips["trip_id"].astype(object)
+    have = tid.isin(pd.Index(traces.trip_id)).to_numpy()
+    if len(traces) and not have.any():
+        ex_ts = ", ".join(repr(v) for v in list(traces.trip_id[:3]))
+        ex_tr = ", ".join(repr(v) for v in tid.head(3).tolist())
+        raise ValueError(
+            f"timeseries: none of its {len(traces)} trip_id value(s) (e.g. {ex_ts}) matches "
+            f"a trip_id of the {what} (e.g. {ex_tr}); both files must use the same ids "
+            "(spelled alike: '007' and 7 differ)")
+    if warn and not have.all():
+        ids = tid[~have].head(5).tolist()
+        warnings.warn(
+            f"{int((~have).sum())} of {len(tid)} {what} have no logged samples in the time "
+            f"series (trip_id {', '.join(repr(v) for v in ids)}"
+            f"{', ...' if (~have).sum() > 5 else ''}): their physics runs on a speed trace "
+            "synthesised from distance_km and avg_speed_kmh", DataWarning, stacklevel=3)
 
 
 def _trace_mismatch(trips: pd.DataFrame, traces: LoggedTraces) -> list[pd.DataFrame]:
@@ -176,8 +247,10 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
     if timeseries is not None:
         if not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
             raise ValueError("trips need a 'trip_id' column to be matched with a time series")
+        trips, timeseries = harmonise_trip_ids(trips, timeseries)
         traces, ts_rej = validate_timeseries(timeseries, min_samples=min_samples,
                                              max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+        match_traces(trips, traces, warn=False)
         mismatch = _trace_mismatch(trips, traces)
         table = _derive_from_traces(trips, traces)
     extra = []
@@ -219,6 +292,7 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
                                          for v in ids.tolist()]})], ignore_index=True)
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
+        match_traces(good, traces)
     return MeasuredTrips(good, traces, rejected)
 
 
@@ -268,7 +342,8 @@ def read_measured_trips(trips_path: str | os.PathLike,
     >>> len(m.trips), m.rejected.field.tolist()
     (1, ['distance_km'])
     """
-    trips = read_table(trips_path)
-    ts = None if timeseries_path is None else read_table(timeseries_path)
+    ids = () if timeseries_path is None else ("trip_id",)  # ids as text: '007' stays '007'
+    trips = read_table(trips_path, text_columns=ids)
+    ts = None if timeseries_path is None else read_table(timeseries_path, text_columns=ids)
     return measured_from_frames(trips, ts, vehicle, min_samples=min_samples,
                                 max_gap_s=max_gap_s, grade_window_m=grade_window_m)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-__all__ = ["CVPlusConformal", "NormalizedConformal"]
+__all__ = ["CVPlusConformal", "NormalizedConformal", "min_calibration_trips"]
 
 
 @dataclass(frozen=True)
@@ -117,6 +117,20 @@ class NormalizedConformal:
 
 
 _CV_BLOCK = 16_384  # test columns per block of the (n_cal, n_test) CV+ matrices
+
+
+def min_calibration_trips(level: float) -> int:
+    """Fewest calibration scores ``n`` with ``ceil((n + 1) level) <= n`` (9 for 0.9).
+
+    Examples
+    --------
+    >>> min_calibration_trips(0.9), min_calibration_trips(0.8), min_calibration_trips(0.95)
+    (9, 4, 19)
+    """
+    n = max(math.floor(level / (1.0 - level)) - 1, 1)
+    while math.ceil((n + 1) * level) > n:
+        n += 1
+    return n
 
 
 def _kth(values: np.ndarray, k: int) -> np.ndarray:

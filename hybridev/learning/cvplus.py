@@ -40,7 +40,7 @@ import numpy as np
 from hybridev.bayes.discrepancy import TermDiscrepancy
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.core.errors import CalibrationWarning, ConvergenceWarning
-from hybridev.learning.conformal import CVPlusConformal
+from hybridev.learning.conformal import CVPlusConformal, min_calibration_trips
 from hybridev.learning.features import trip_features
 from hybridev.learning.nn import EnsembleMLP
 from hybridev.learning.splits import group_holdout, group_kfold
@@ -174,16 +174,20 @@ def warn_calibration(model, codes: np.ndarray, cal_idx: np.ndarray, level: float
     n = cp.n_calibration
     cal_groups = len(np.unique(codes if isinstance(cp, CVPlusConformal) else codes[cal_idx]))
     grouped = len(np.unique(codes)) < len(codes)
+    cv = isinstance(cp, CVPlusConformal)
     if math.ceil((n + 1) * level) > n:
+        hint = ("(CV+ already calibrates on every trip)" if cv else
+                "or use conformal='cv+', which calibrates on every trip")
         warnings.warn(
             f"{n} calibration trip(s) cannot calibrate {level:g} intervals (the highest level "
-            f"they support is {n / (n + 1):.3f}); fit on more trips or use conformal='cv+', "
-            "which calibrates on every trip", CalibrationWarning, stacklevel=3)
+            f"they support is {n / (n + 1):.3f}); fit on at least "
+            f"{min_calibration_trips(level)} trips {hint}", CalibrationWarning, stacklevel=3)
     elif grouped and cal_groups < MIN_GROUPS:
+        hint = "" if cv else " or use conformal='cv+'"
         warnings.warn(
             f"the calibration trips come from only {cal_groups} group(s) (< {MIN_GROUPS}): "
-            "coverage on new groups (days, sessions) is poorly determined; fit on more "
-            "days or use conformal='cv+'", CalibrationWarning, stacklevel=3)
+            f"coverage on new groups (days, sessions) is poorly determined; fit on more "
+            f"days{hint}", CalibrationWarning, stacklevel=3)
 
 
 def nets_to_arrays(nets) -> dict[str, np.ndarray]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from hybridev.bayes.sampler import AUTO_GROUP_COLUMNS
+from hybridev.bayes.sampler import AUTO_GROUP_COLUMNS, auto_group_labels, group_labels
 
 __all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
 
@@ -27,9 +27,10 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
     groups : None, "auto", str or array_like (n_trips,)
         ``None`` (each trip its own group), a column name of ``measured``, or
         one label per trip (any hashable values). ``"auto"``: the
-        :data:`AUTO_GROUP_COLUMNS` column ``measured`` has first (missing
-        labels a group each; a single group, or no such column, falls back to
-        one trip per group), as :func:`hybridev.calibrate_physics` does.
+        :data:`AUTO_GROUP_COLUMNS` column of ``measured`` with two or more
+        groups (missing labels a group each; none: one trip per group), as
+        :func:`hybridev.calibrate_physics` does. A ``date`` column is taken at
+        day resolution (:func:`hybridev.bayes.sampler.group_labels`).
     measured : pandas.DataFrame or None
         The trip table (for a column name).
     n_trips : int
@@ -44,13 +45,10 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
     if groups is None:
         return np.arange(n_trips)
     if isinstance(groups, str) and groups == "auto":
-        col = next((c for c in AUTO_GROUP_COLUMNS
-                    if measured is not None and c in measured.columns), None)
-        if col is None:
+        labels = None if measured is None else auto_group_labels(measured)
+        if labels is None or len(labels) != n_trips:
             return np.arange(n_trips)
-        g = pd.Series(np.asarray(measured[col].to_numpy(), dtype=object).ravel())
-        if len(g) != n_trips:
-            return np.arange(n_trips)
+        g = pd.Series(np.asarray(labels.to_numpy(), dtype=object).ravel())
         lab = g.astype(str).where(g.notna(), pd.Series([f"\0trip {i}" for i in range(len(g))]))
         codes = pd.factorize(lab)[0].astype(np.int64)
         return codes if len(np.unique(codes)) > 1 else np.arange(n_trips)
@@ -59,7 +57,7 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
             cols = [] if measured is None else list(measured.columns)
             raise ValueError(f"groups={groups!r} is not a column of the measured trips; "
                              f"allowed: one of {cols} or an array of {n_trips} labels")
-        groups = measured[groups].to_numpy()
+        groups = group_labels(measured, groups).to_numpy()
     g = pd.Series(np.asarray(groups, dtype=object).ravel())
     if len(g) != n_trips:
         raise ValueError(f"groups has {len(g)} labels; expected one per trip ({n_trips})")

@@ -76,7 +76,11 @@ from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.core.checks import check_seed
 from hybridev.core.plugins import entry_point, lazy_backend
-from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
+from hybridev.learning.conformal import (
+    CVPlusConformal,
+    NormalizedConformal,
+    min_calibration_trips,
+)
 from hybridev.learning.cvplus import (
     nets_from_arrays,
     nets_to_arrays,
@@ -307,7 +311,9 @@ class ProbabilisticMixin(OutOfDomainMixin):
                 f"level={level!r} is too high for the {cp.n_calibration} calibration trips: "
                 f"the highest level they support is "
                 f"{cp.n_calibration / (cp.n_calibration + 1):.3f} (n / (n + 1)); use a lower "
-                "level or fit on more trips (CV+ uses every trip, see conformal=)")
+                f"level or fit on at least {min_calibration_trips(level)} trips"
+                + ("" if isinstance(cp, CVPlusConformal)
+                   else " (conformal='cv+' calibrates on every trip)"))
         return q
 
     def _cv_nets(self) -> list:

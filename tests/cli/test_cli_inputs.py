@@ -165,3 +165,40 @@ def test_heater_kind_of_a_coastdown_vehicle(logger, tmp_path, capsys):
     capsys.readouterr()
     assert main([*rng, "--coastdown", "150", "0.3", "0.03", "1500", "--heater",
                  "heat_pump"]) == 0
+
+
+def test_new_user_logger_variants(logger, tmp_path, capsys):
+    """A trace-only column renamed, the fit's calibration line, a broken trace at predict,
+    a trip without a trace: each said plainly, one line per warning."""
+    ts = pd.read_parquet(logger / "ts.parquet").rename(columns={"amb_temp_c": "outside_temp"})
+    ts.to_parquet(tmp_path / "ts.parquet", index=False)
+    out = tmp_path / "m"
+    assert main(["fit", str(logger / "bare.csv"), "--timeseries", str(tmp_path / "ts.parquet"),
+                 "--columns", "e_net=energy_kwh,outside_temp=amb_temp_c", "--soc-initial",
+                 "0.8", "--out", str(out), *FAST]) == 0
+    printed = capsys.readouterr().out
+    assert "CV+" in printed and "for conformal calibration" not in printed  # 70 trips
+    # one trace broken (NaN speed) and one trip without any samples
+    ids = ts["trip_id"].unique()
+    bad = ts.copy()
+    bad.loc[bad["trip_id"] == ids[0], "speed_kmh"] = np.nan
+    bad = bad[bad["trip_id"] != ids[1]]
+    bad.to_parquet(tmp_path / "bad.parquet", index=False)
+    pred = tmp_path / "p.csv"
+    summaries = "km=distance_km,v_mean=avg_speed_kmh,t_amb=temperature_c,"  # for no trace
+    assert main(["predict", str(out), str(logger / "trips.csv"), "--timeseries",
+                 str(tmp_path / "bad.parquet"), "--columns",
+                 summaries + "outside_temp=amb_temp_c", "--soc-initial", "0.8",
+                 "--out", str(pred)]) == 0
+    err = capsys.readouterr().err
+    assert f"trip_id='{ids[0]}'" in err and "predicted on a synthesised trace" in err
+    assert "hybridev predict: DataWarning: 2 of 70 trips to predict have no logged" in err
+    assert ".py:" not in err  # no Python file paths in the warnings
+    assert len(pd.read_csv(pred)) == 70  # the trips stay, on a synthesised trace
+    # ids that match nothing: a clear error, exit 2
+    ts.assign(trip_id="x" + ts["trip_id"].astype(str)).to_parquet(tmp_path / "x.parquet")
+    assert main(["predict", str(out), str(logger / "bare.csv"), "--timeseries",
+                 str(tmp_path / "x.parquet"), "--columns", "outside_temp=amb_temp_c",
+                 "--soc-initial", "0.8", "--out", str(tmp_path / "p2.csv")]) == 2
+    assert "same ids" in capsys.readouterr().err
+    assert not (tmp_path / "p2.csv").exists()

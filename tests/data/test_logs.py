@@ -175,3 +175,39 @@ def test_no_pandas_warnings_on_report():
         warnings.simplefilter("error")
         m = measured_from_frames(t, ts)
     assert list(m.trips.trip_id) == ["t1"] and m.n_rejected == 4
+
+
+def test_zero_padded_ids_in_csv_match_parquet_traces(tmp_path):
+    """A CSV reader would turn '007' into 7; with a time series the ids stay text."""
+    t = _trips(3).assign(trip_id=["000", "001", "007"])
+    t.to_csv(tmp_path / "t.csv", index=False)
+    _series(["000", "001", "007"]).to_parquet(tmp_path / "ts.parquet")
+    m = read_measured_trips(tmp_path / "t.csv", tmp_path / "ts.parquet")
+    assert len(m.trips) == 3 and len(m.rejected) == 0
+    assert m.trips["trip_id"].tolist() == ["000", "001", "007"]
+    assert list(m.traces.trip_id) == ["000", "001", "007"]
+
+
+def test_numeric_and_text_ids_are_harmonised():
+    t = _trips(3).assign(trip_id=[1, 2, 3])
+    m = measured_from_frames(t, _series(["1", "2", "3"]))
+    assert len(m.trips) == 3 and len(m.traces) == 3 and len(m.rejected) == 0
+    # same types are left as they are
+    m2 = measured_from_frames(_trips(3), _series(["t0", "t1", "t2"]))
+    assert m2.trips["trip_id"].tolist() == ["t0", "t1", "t2"]
+
+
+def test_no_matching_ids_is_an_error_not_64_rejections():
+    with pytest.raises(ValueError, match=r"none of its 3 trip_id value\(s\).*same ids"):
+        measured_from_frames(_trips(3), _series(["a", "b", "c"]))
+
+
+def test_trips_without_a_trace_are_kept_and_warned():
+    from hybridev.core.errors import DataWarning
+
+    with pytest.warns(DataWarning, match=r"1 of 3 trips have no logged samples.*'t2'"):
+        m = measured_from_frames(_trips(3), _series(["t0", "t1"]))
+    assert len(m.trips) == 3 and len(m.traces) == 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)  # every trip has its trace: no warning
+        measured_from_frames(_trips(2), _series(["t0", "t1"]))

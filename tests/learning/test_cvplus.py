@@ -47,8 +47,14 @@ def test_groups_stay_together_in_folds_and_warn_when_too_few(data):
     with pytest.warns(CalibrationWarning, match="group"):  # 30 % of 10 days: 3 days
         HybridModel(**FAST, conformal="split", conformal_fraction=0.3).fit(
             d, seed=0, groups="day")
-    with pytest.warns(CalibrationWarning, match="cannot calibrate 0.9"):
+    with pytest.warns(CalibrationWarning, match="cannot calibrate 0.9.*conformal='cv\\+'"):
         HybridModel(**FAST, conformal="split").fit(d.head(30), seed=0)
+    # with CV+ already: the advice is the number of trips, not a mode it already uses
+    with pytest.warns(CalibrationWarning, match=r"at least 9 trips \(CV\+ already") as rec:
+        m8 = HybridModel(**FAST).fit(d.head(8), seed=0)
+    assert not any("conformal='cv+'" in str(w.message) for w in rec)
+    with pytest.raises(ValueError, match=r"fit on at least 9 trips$"):
+        m8.predict_interval(d.head(2).drop(columns=["energy_kwh"]), level=0.9)
 
 
 def test_save_load_keeps_cv_plus_mondrian_and_domain(data, tmp_path):

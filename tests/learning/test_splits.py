@@ -52,3 +52,20 @@ def test_auto_groups_use_date_then_session_and_fall_back_to_trips():
     assert group_codes("auto", t.drop(columns="date"), 4).tolist() == [0, 1, 2, 3]
     assert group_codes("auto", pd.DataFrame({"date": ["d"] * 3}), 3).tolist() == [0, 1, 2]
     assert group_codes("auto", pd.DataFrame({"x": [1, 2]}), 2).tolist() == [0, 1]
+
+
+def test_auto_groups_take_a_date_at_day_resolution():
+    t = pd.DataFrame({"date": ["2024-01-05 08:13:00", "2024-01-05 17:40:00",
+                               "2024-01-06 07:02:00", None]})
+    assert group_codes("auto", t, 4).tolist()[:3] == [0, 0, 1]
+    assert group_codes("auto", t, 4)[3] not in (0, 1)  # missing date: a group of its own
+    assert group_codes("date", t.iloc[:3], 3).tolist() == [0, 0, 1]  # named column alike
+    ts = pd.DataFrame({"date": pd.to_datetime(["2024-01-05 08:00", "2024-01-05 09:00"])})
+    assert group_codes("auto", ts, 2).tolist() == [0, 1]  # one day only: a trip each
+    assert group_codes("date", ts, 2).tolist() == [0, 0]
+
+
+def test_auto_groups_skip_a_single_date_for_sessions():
+    t = pd.DataFrame({"date": ["2024-01-05"] * 4, "session_group": [1, 1, 2, 3]})
+    assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]
+    assert group_codes("auto", t.drop(columns="session_group"), 4).tolist() == [0, 1, 2, 3]

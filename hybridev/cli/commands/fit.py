@@ -1,7 +1,8 @@
 """``hybridev fit``: train the hybrid model on measured trips and save it.
 
 By default the probabilistic model (5 heteroscedastic members, emcee physics
-posterior, 15 % of the trips held out for conformal calibration); ``--paper``
+posterior, conformal calibration: CV+ below 250 trips, a 15 % split from there on);
+``--paper``
 gives the paper's single MSE network on the nominal physics.
 """
 
@@ -43,7 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "posterior with emcee (default: calibrate)")
     p.add_argument("--conformal-fraction", type=float, default=None,
                    help="share of the trips held out of all fitting for the split-conformal "
-                        "calibration of intervals, [0, 0.9] (default 0.15; 0: uncalibrated)")
+                        "calibration of intervals, used from 250 trips on (below that CV+ "
+                        "calibrates on every trip), [0, 0.9] (default 0.15; 0: uncalibrated)")
     p.add_argument("--paper", action="store_true",
                    help="the paper's point model: --members 1 --no-heteroscedastic "
                         "--no-calibrate-physics --conformal-fraction 0 (options given "
@@ -96,8 +98,15 @@ def run(args: argparse.Namespace) -> int:
         model.fit(table, seed=args.seed, progress=bar.update_to, timeseries=traces)
     model.save(args.out)
     info = model.fit_info_
-    msg = (f"fitted on {info['n_train']} trips ({info['n_val']} held out for early stopping, "
-           f"{info['n_cal']} for conformal calibration), {info['n_epochs']} epochs")
+    if info.get("conformal") == "cv+":  # every trip calibrates, out of fold
+        cal = (f"intervals calibrated by CV+ over {info.get('cv_folds')} folds of whole "
+               "groups: every trip both fits and calibrates")
+    elif info.get("conformal") == "split":
+        cal = f"{info['n_cal']} held out for conformal calibration"
+    else:
+        cal = "intervals not calibrated"
+    msg = (f"fitted on {info['n_train']} trips ({info['n_val']} held out for early stopping; "
+           f"{cal}), {info['n_epochs']} epochs")
     if "val_mae_kwh_model" in info:
         msg += (f"; validation MAE {info['val_mae_kwh_model']:.3f} kWh "
                 f"(physics only {info['val_mae_kwh_physics']:.3f} kWh)")
