@@ -21,6 +21,11 @@ rather than resampling, so no speed value is invented except across a gap,
 where speed is taken as linear in time (the midpoint rule of
 :mod:`hybridev.physics.forces`). Trips with a gap longer than ``max_gap_s`` are
 rejected because a linear ramp cannot stand in for minutes of driving.
+A log sampled more coarsely than :data:`COARSE_SAMPLING_S` (median interval) is
+used, with a :class:`~hybridev.core.errors.DataWarning`: between samples the
+physics sees a straight ramp of speed, so the accelerations of stop-and-go
+driving, and the inertial and braking energy they carry, are smoothed away
+(a steady bias that the calibration absorbs, but only for traces logged alike).
 
 Grade from elevation: altitude from GPS is integer-valued and noisy, so it is
 never differenced sample to sample. The grade at each sample is the slope of
@@ -32,12 +37,20 @@ trips). Grades are clipped to +-30 %.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 
+from hybridev.core.errors import DataWarning
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = ["MAX_GRADE", "MAX_SPEED_KMH", "REJECTED_COLUMNS", "as_traces", "validate_timeseries"]
+__all__ = ["COARSE_SAMPLING_S", "MAX_GRADE", "MAX_SPEED_KMH", "REJECTED_COLUMNS", "as_traces",
+           "validate_timeseries"]
+
+COARSE_SAMPLING_S = 2.0
+"""Median sampling interval (s) above which :func:`validate_timeseries` warns
+(:class:`~hybridev.core.errors.DataWarning`) that the trace smooths accelerations."""
 
 
 MAX_SPEED_KMH = 250.0
@@ -209,6 +222,16 @@ def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
         grade = _grade_from_elevation(code_k, dist, values["elevation_m"][keep], grade_window_m)
     else:
         grade = np.zeros(len(t_k))
+    within = np.ones(len(t_k), dtype=bool)
+    within[offsets[:-1]] = False  # a trip's first sample starts no interval
+    dt_k = np.diff(t_k, prepend=np.nan)[within]
+    if len(dt_k) and float(np.median(dt_k)) > COARSE_SAMPLING_S:
+        warnings.warn(
+            f"timeseries: samples are {float(np.median(dt_k)):.3g} s apart (median; more than "
+            f"{COARSE_SAMPLING_S:g} s): between samples the physics sees a straight speed ramp, "
+            "so stop-and-go accelerations and their inertial and braking energy are smoothed "
+            "away (the calibration absorbs a steady bias; log at 1 Hz if you can)",
+            DataWarning, stacklevel=2)
     traces = LoggedTraces(
         trip_id=np.asarray(uniq, dtype=object)[~bad_trip], offsets=offsets, t_s=t_k,
         speed_mps=v_k, grade_rad=grade,

@@ -211,3 +211,15 @@ def test_trips_without_a_trace_are_kept_and_warned():
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)  # every trip has its trace: no warning
         measured_from_frames(_trips(2), _series(["t0", "t1"]))
+
+
+def test_coarse_sampling_is_used_with_a_warning():
+    from hybridev.core.errors import DataWarning
+
+    coarse = _series(["a"], n=30).assign(t_s=lambda d: d.t_s * 5.0)  # every 5 s
+    with pytest.warns(DataWarning, match=r"samples are 5 s apart \(median"):
+        tr, rej = validate_timeseries(coarse)
+    assert list(tr.trip_id) == ["a"] and len(rej) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)  # 1 Hz: no warning
+        validate_timeseries(_series(["a"]))
