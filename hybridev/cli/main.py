@@ -2,7 +2,9 @@
 
 Subcommands live in :mod:`hybridev.cli.commands`. Every subcommand exits with 0 on
 success and with 2 and a one-line message (naming the field, value and allowed
-range) on bad input. Warnings are printed as one line each,
+range) on bad input, and with 130 and a one-line message when interrupted
+(Ctrl-C, without a traceback; outputs are written to a temporary file and
+renamed only when complete, so an interrupted run leaves none half-written). Warnings are printed as one line each,
 ``hybridev <command>: <WarningClass>: <message>``, without Python file paths.
 """
 
@@ -49,6 +51,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as exc:
             print(f"hybridev {args.command}: error: {exc}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:
+            print(f"hybridev {args.command}: interrupted (each output is written whole or "
+                  "not at all)", file=sys.stderr)
+            return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -330,6 +330,56 @@ def test_cli_plan_with_saved_model(tmp_path, capsys):
     assert len(pd.read_csv(trips_out)) == 6
 
 
+def test_cli_level_lets_a_small_model_plan(tmp_path, capsys):
+    """A model with 6 calibration trips cannot support the default 0.9 (exit 2, naming the
+    level and the trips); --level 0.8 (needs 4) plans, and is passed to the model."""
+    from hybridev import HybridModel, make_trips, simulate
+
+    t = simulate(make_trips(40, seed=1), n_steps=100)
+    t["energy_kwh"] = t["energy_kwh_physics"] * 1.1
+    from hybridev.core.errors import CalibrationWarning
+
+    with pytest.warns(CalibrationWarning, match="cannot calibrate 0.9"):
+        model = HybridModel(max_epochs=3, n_steps=100, n_members=2, conformal="split",
+                            conformal_fraction=0.15, calibrate_physics=False).fit(t, seed=0)
+    assert model.conformal_.n_calibration == 6
+    model.save(tmp_path / "model")
+    sched = tmp_path / "s.csv"
+    schedule(TWO_DAYS, 5.0 * ENERGY).to_csv(sched, index=False)
+    tar = tmp_path / "t.csv"
+    tariff().to_csv(tar, index=False)
+    out = tmp_path / "plan.csv"
+    argv = ["plan-charging", str(sched), "--tariff", str(tar), "--soc-now", "0.3",
+            "--model", str(tmp_path / "model"), "--charger-kw", "7", "--n-samples", "1000",
+            "--n-eval", "2000", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "level=0.9 is too high for the 6 calibration trips" in err
+    assert not out.exists()
+    assert main([*argv, "--level", "0.8"]) == 0
+    capsys.readouterr()
+    assert len(pd.read_csv(out)) == 192
+    assert main([*argv, "--level", "1.5", "--out", str(tmp_path / "p2.csv")]) == 2
+    assert "level" in capsys.readouterr().err
+    assert not (tmp_path / "p2.csv").exists()
+
+
+def test_plan_passes_level_to_a_model_that_takes_one():
+    seen = []
+
+    class Model:
+        capacity_kwh = 60.0
+
+        def predict_distribution(self, trips, *, level=0.9):
+            seen.append(level)
+            return dist_for(trips["distance_km"].to_numpy() / 5.0, noise_cv=0.1)
+
+    sched = schedule(TWO_DAYS, 5.0 * ENERGY).assign(soc_initial=0.5)
+    plan_charging(Model(), sched, soc_now=0.3, tariff=tariff(), charger_kw=7.0,
+                  n_samples=S, n_eval=N, level=0.8)
+    assert seen == [0.8]
+
+
 class _SocModel:
     """Energy rises as the departure SoC falls (an I^2 R loss), 10 % noise; records calls."""
 

@@ -127,3 +127,21 @@ def test_console_exit_code_is_2(tmp_path):
     assert res.returncode == 2
     assert "n_trips=-5" in res.stderr and "Traceback" not in res.stderr
     assert not path.exists()
+
+
+def test_interrupt_exits_130_without_traceback_or_output(tmp_path, capsys, monkeypatch):
+    """Ctrl-C during a run: exit 130, one line on stderr, no half-written output."""
+    from hybridev.core import fileio
+
+    def interrupted(df, path, **kw):  # interrupt while the output is being written
+        with fileio.atomic_path(path) as tmp:
+            df.head(1).to_csv(tmp)
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(fileio, "write_table", interrupted)
+    out = tmp_path / "sim.csv"
+    rc = main(["simulate", "--n-trips", "3", "--n-steps", "50", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 130
+    assert "hybridev simulate: interrupted" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []

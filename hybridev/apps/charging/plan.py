@@ -20,6 +20,7 @@ achieved risk, the expected cost and the SoC band are measured on
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from dataclasses import replace
 
@@ -273,6 +274,14 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     settles after one or two passes, as the energy depends on the SoC only
     weakly). A schedule with ``soc_initial`` is predicted once, as given.
 
+    ``level`` also goes to ``model.predict_distribution(trips, level=level)``
+    when the model's method takes a ``level`` (as
+    :meth:`hybridev.HybridModel.predict_distribution` does): it is the level
+    whose conformal correction sets the predictive spread. A model calibrated
+    on fewer than 9 trips cannot support 0.9 (see
+    :func:`hybridev.learning.conformal.min_calibration_trips`); plan with a
+    lower ``level`` (0.8 needs 4) rather than not at all.
+
     Parameters
     ----------
     soc_refine : int
@@ -304,7 +313,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     kw = dict(method=method, n_samples=n_samples, n_eval=n_eval, level=level,
               risk_neutral=risk_neutral, compare=compare, seed=seed,
               time_limit_s=time_limit_s, margin_se=margin_se)
-    out = _plan(problem, model.predict_distribution(table), np.arange(problem.n_trips), **kw)
+    out = _plan(problem, _predict(model, table, level), np.arange(problem.n_trips), **kw)
     if "soc_initial" in problem.trips.columns:
         return out
     for _ in range(n_refine):
@@ -314,7 +323,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
         table = table.assign(soc_initial=planned)
         with warnings.catch_warnings():  # the first prediction warned already
             warnings.simplefilter("ignore", OutOfDomainWarning)
-            dist = model.predict_distribution(table)
+            dist = _predict(model, table, level)
         out = _plan(problem, dist, np.arange(problem.n_trips), **kw)
     return out
 
@@ -378,3 +387,15 @@ def evaluate_charging(charge_kw, dist, capacity_kwh: float,
         problem.block, weights=x, minlength=problem.n_trips + 1)[: problem.n_trips]
     return assess_plan(problem, x, y, ev, mean, level=level, method="given",
                    status="evaluated", risk=None, gamma=None, cal=None, n_samples=0)
+
+
+def _predict(model, table: pd.DataFrame, level: float):
+    """``model.predict_distribution(table, level=level)``, without ``level`` for a model
+    whose method takes none (any object with the method serves, see :func:`plan_charging`)."""
+    try:
+        params = inspect.signature(model.predict_distribution).parameters.values()
+    except (TypeError, ValueError):  # a builtin or C callable: call it plainly
+        params = ()
+    if any(p.name == "level" or p.kind is p.VAR_KEYWORD for p in params):
+        return model.predict_distribution(table, level=level)
+    return model.predict_distribution(table)

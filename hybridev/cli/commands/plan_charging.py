@@ -40,6 +40,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="calibration samples (default 4000 quantile / 300 scenario)")
     p.add_argument("--n-eval", type=int, default=20000,
                    help="fresh samples for the achieved risk (default 20000)")
+    p.add_argument("--level", type=float, default=0.9,
+                   help="central level of the reported SoC and energy bands, and the level "
+                        "whose conformal correction sets the model's predictive spread, "
+                        "(0, 1) (default 0.9; a model calibrated on fewer than 9 trips needs "
+                        "a lower one, e.g. 0.8)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--risk-neutral", action="store_true",
                    help="plan for mean energies only (no chance constraint)")
@@ -73,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         model, schedule, soc_now=args.soc_now, tariff=tariff, charger_kw=args.charger_kw,
         charge_efficiency=args.efficiency, soc_min=args.soc_min, soc_max=args.soc_max,
         risk=args.risk, method=args.method, n_samples=args.n_samples, n_eval=args.n_eval,
-        seed=args.seed, risk_neutral=args.risk_neutral)
+        level=args.level, seed=args.seed, risk_neutral=args.risk_neutral)
     print(result.summary())
     write_table(result.plan, args.out)
     print(f"wrote {len(result.plan)} slots to {args.out}")

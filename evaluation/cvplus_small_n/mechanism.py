@@ -1,0 +1,252 @@
+"""Where the 20-trip CV+ over-coverage lives: design, conditions, held-out scores (study).
+
+Run from the repository root::
+
+    python evaluation/cvplus_small_n/mechanism.py [--out DIR] [--draws 16]
+        [--refit-draws 12] [--jobs 2]
+
+``cvplus_small_n.py`` and ``exchangeability.py`` find that the default (CV+) 90 %
+intervals cover about 0.95 of new trips at 20 synthetic training trips, with no
+defect in the scoring. This script tests three more explanations, on the truth and
+test set of ``shift_and_small_data`` (``truth(n, seed)``, 1,000 test trips from seed
+999, ``HybridModel()`` defaults):
+
+A. **The balanced design.** ``make_trips`` splits the driving modes equally, so the
+   trips of one draw are not independent: a held-out trip's mode is
+   under-represented in its fold's training trips, which would make the
+   out-of-fold scores pessimistic. The same fit on 20 trips drawn at random from a
+   2,000-trip pool (independent modes) tells whether this matters.
+B. **Coverage by condition.** The library's interval and width per temperature of
+   the in-domain test trips, and the mean normalised score ``|y - mu_k| / s_k`` of
+   the fold models on their held-out trips and on the test trips, per temperature:
+   whether the normalisation (the predictive sd) follows how hard each condition is.
+C. **Are held-out scores exchangeable with new trips' scores?** For each training
+   trip, the share ``p`` of the test trips whose score under the same fold model is at
+   least the trip's out-of-fold score. Exchangeable scores give uniform ``p`` and a
+   second-smallest ``p`` of each draw of ``2/21 = 0.095`` on average (which is one
+   minus the coverage of the pooled 19th-of-20 threshold). The same for standalone
+   refits (a ``HybridModel`` fitted from scratch on the 16 other trips of each of 5
+   folds, sharing nothing with the held-out trips). Extreme held-out scores
+   (``p < 0.05``) are then split by how many trips of the same temperature and mode
+   the fold's training trips hold.
+
+Writes ``mechanism.md`` and ``.json`` to ``--out`` (default: this folder). Uses the
+private ``HybridModel._distributions``, ``_distribution`` and ``_cv_nets``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "shift_and_small_data"))
+import shift_and_small_data as ssd  # the truth of the size study
+
+from hybridev import HybridModel
+from hybridev.core.fileio import atomic_path
+
+HERE = Path(__file__).resolve().parent
+LEVEL = 0.9
+N = 20
+TEMPS = (-5.0, 20.0, 32.0)  # the truth's temperatures (make_trips)
+
+
+def _test():
+    test = ssd.truth(1000, 999)
+    return test.drop(columns=["energy_kwh", "soc_final"]), test["energy_kwh"].to_numpy(float)
+
+
+def _iid_draw(rep: int):
+    """20 trips drawn at random from a 2,000-trip pool: modes independent between trips."""
+    pool = ssd.truth(2000, 300 + rep)
+    out = pool.sample(N, random_state=rep).reset_index(drop=True)
+    out["trip_id"] = np.arange(N)
+    return out
+
+
+def _fold_scores(model: HybridModel, x, y: np.ndarray, seed: int) -> np.ndarray:
+    """|y - mu_k| / s_k of each fold model on the trips ``x``, shape (n_folds, n_trips)."""
+    _, d = model._distributions(x, seed=seed, nets=tuple(model._cv_nets()),
+                                physics=tuple(model.cv_physics_))
+    mu = np.stack([q.mean() for q in d])
+    sd = np.maximum(np.stack([q.std() for q in d]), 1e-12)
+    return np.abs(y[None, :] - mu) / sd
+
+
+def design_draw(rep: int) -> dict:
+    """Parts A, B and the CV+ half of C for one training draw."""
+    x, y = _test()
+    t_test = x["temperature_c"].to_numpy(float)
+    out = {"draw": rep}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for design, train in (("balanced", ssd.truth(N, 100 + rep)), ("iid", _iid_draw(rep))):
+            model = HybridModel(conformal="cv+").fit(train, seed=rep)
+            pred = model.predict_interval(x, LEVEL, seed=rep)
+            ok = pred["in_domain"].to_numpy(bool)
+            lo, hi = pred["energy_kwh_lo"].to_numpy(float), pred["energy_kwh_hi"].to_numpy(float)
+            inside = (y >= lo) & (y <= hi)
+            row = {"coverage_in": float(inside[ok].mean()),
+                   "rel_width_in": float(np.mean((hi - lo)[ok] / y[ok]))}
+            if design == "balanced":
+                cp = model.conformal_
+                t_train = train["temperature_c"].to_numpy(float)
+                oof = np.abs(cp.residuals)
+                sc = _fold_scores(model, x, y, rep)
+                for t in TEMPS:
+                    sel = ok & (t_test == t)
+                    row[f"coverage_{t:g}"] = float(inside[sel].mean())
+                    row[f"rel_width_{t:g}"] = float(np.mean((hi - lo)[sel] / y[sel]))
+                    row[f"test_score_{t:g}"] = float(sc[:, sel].mean())
+                    m = t_train == t
+                    row[f"oof_score_{t:g}"] = float(oof[m].mean()) if m.any() else None
+                    row[f"n_train_{t:g}"] = int(m.sum())
+                row["held_out"] = _held_out_rows(train, cp.fold, oof, sc[:, ok])
+            out[design] = row
+    return out
+
+
+def _cell_count(train, fold: np.ndarray, i: int) -> int:
+    """Trips of trip ``i``'s temperature and mode among its fold's training trips."""
+    rest = (fold != fold[i])
+    same = ((train["temperature_c"].to_numpy(float) == train["temperature_c"].iloc[i])
+            & (train["mode"].to_numpy(object) == train["mode"].iloc[i]))
+    return int((rest & same).sum())
+
+
+def _held_out_rows(train, fold: np.ndarray, held_scores: np.ndarray,
+                   test_scores: np.ndarray) -> list[dict]:
+    """p of each held-out score against its fold model's scores on the test trips."""
+    return [{"p": float(np.mean(test_scores[fold[i]] >= held_scores[i])),
+             "cell": _cell_count(train, fold, i)} for i in range(len(held_scores))]
+
+
+def refit_draw(rep: int) -> dict:
+    """The standalone half of C: 5 refits on the other 16 trips of each fold."""
+    x, y = _test()
+    train = ssd.truth(N, 100 + rep)
+    fold = np.random.default_rng(rep).permutation(np.arange(N) % 5)
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for k in range(5):
+            rest = train[fold != k].reset_index(drop=True)
+            held = train[fold == k]
+            model = HybridModel(conformal_fraction=0.0).fit(rest, seed=10 * rep + k)
+            _, dt = model._distribution(x, seed=rep)
+            _, dh = model._distribution(held.drop(columns=["energy_kwh", "soc_final"]),
+                                        seed=rep)
+            st = np.abs(y - dt.mean()) / np.maximum(dt.std(), 1e-12)
+            sh = np.abs(held["energy_kwh"].to_numpy(float) - dh.mean()) / np.maximum(dh.std(),
+                                                                                     1e-12)
+            for j, i in enumerate(np.flatnonzero(fold == k)):
+                rows.append({"p": float(np.mean(st >= sh[j])),
+                             "cell": _cell_count(train, fold, int(i))})
+    return {"draw": rep, "held_out": rows}
+
+
+def _p_summary(draws: list[list[dict]]) -> dict:
+    p = np.array([r["p"] for d in draws for r in d])
+    p2 = [float(np.sort([r["p"] for r in d])[1]) for d in draws]
+    return {"n": int(p.size), "share_below_0.05": float(np.mean(p < 0.05)),
+            "share_below_0.10": float(np.mean(p < 0.10)), "mean_second_smallest_p": p2}
+
+
+def _cell_part(draws: list[list[dict]], lo: int, hi: int) -> str:
+    """"trips | share p < 0.05" of the held-out trips with lo..hi same-cell training trips."""
+    p = np.array([x["p"] for d in draws for x in d if lo <= x["cell"] <= hi])
+    return f"{p.size} | {np.mean(p < 0.05):.3f}" if p.size else "0 | -"
+
+
+def _ms(v) -> str:
+    v = np.asarray([u for u in v if u is not None], float)
+    return f"{v.mean():.3f} +- {v.std(ddof=1) / np.sqrt(len(v)):.3f}"
+
+
+def write(res: dict, out: Path) -> None:
+    a, r = res["design"], res["refit"]
+    lines = ["# CV+ at 20 trips: design, conditions and held-out scores (study)", "",
+             f"Generated by `python evaluation/cvplus_small_n/mechanism.py` in "
+             f"{res['runtime_s']} s; do not edit by hand. Set-up: the script's docstring. "
+             "Mean +- standard error over the draws.", "",
+             f"## A. Balanced against independent modes ({len(a)} draws)", "",
+             "| training draw | 90 % coverage, in-domain test trips | width / energy |",
+             "|---|---|---|"]
+    for design, label in (("balanced", "`truth(20, seed)`: modes split equally"),
+                          ("iid", "20 trips at random from a 2,000-trip pool")):
+        lines.append(f"| {label} | {_ms([d[design]['coverage_in'] for d in a])} | "
+                     f"{_ms([d[design]['rel_width_in'] for d in a])} |")
+    lines += ["", "## B. By temperature (balanced draws, in-domain test trips)", "",
+              "| temperature | training trips per draw | 90 % coverage | width / energy | "
+              "mean score, held-out trips | mean score, test trips |", "|---|---|---|---|---|---|"]
+    for t in TEMPS:
+        b = [d["balanced"] for d in a]
+        lines.append(f"| {t:g} degC | {np.mean([x[f'n_train_{t:g}'] for x in b]):.1f} | "
+                     f"{_ms([x[f'coverage_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'rel_width_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'oof_score_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'test_score_{t:g}'] for x in b])} |")
+    cv = _p_summary([d["balanced"]["held_out"] for d in a])
+    sa = _p_summary([d["held_out"] for d in r])
+    lines += ["", "## C. Held-out scores against the same model's scores on new trips", "",
+              "`p`: share of the test trips scoring at least as high as the held-out trip. "
+              "Exchangeable: 0.05 and 0.10 below 0.05 and 0.10; second-smallest `p` of a "
+              "draw 0.095 on average (one minus the coverage of the 19th of 20 scores).", "",
+              "| models | held-out trips | share p < 0.05 | share p < 0.10 | "
+              "second-smallest p per draw |", "|---|---|---|---|---|",
+              f"| CV+ fold models in the fit ({len(a)} draws) | {cv['n']} | "
+              f"{cv['share_below_0.05']:.3f} | {cv['share_below_0.10']:.3f} | "
+              f"{_ms(cv['mean_second_smallest_p'])} |",
+              f"| standalone refits on 16 trips ({len(r)} draws) | {sa['n']} | "
+              f"{sa['share_below_0.05']:.3f} | {sa['share_below_0.10']:.3f} | "
+              f"{_ms(sa['mean_second_smallest_p'])} |", "",
+              "Share of extreme held-out scores (p < 0.05) by the number of trips of the same "
+              "temperature and mode among the fold's training trips:", "",
+              "| same-cell training trips | CV+ fold models: trips | p < 0.05 | "
+              "standalone: trips | p < 0.05 |", "|---|---|---|---|---|"]
+    for lo_, hi_, label in ((0, 0, "0"), (1, 1, "1"), (2, 99, "2 or more")):
+        lines.append(f"| {label} | {_cell_part([d['balanced']['held_out'] for d in a], lo_, hi_)}"
+                     f" | {_cell_part([d['held_out'] for d in r], lo_, hi_)} |")
+    with atomic_path(out / "mechanism.md") as tmp:
+        Path(tmp).write_text("\n".join(lines) + "\n")
+
+
+def _one_thread() -> None:
+    import torch
+
+    torch.set_num_threads(1)  # one core per worker process
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--draws", type=int, default=16, help="training draws of parts A-C")
+    ap.add_argument("--refit-draws", type=int, default=12,
+                    help="draws of the standalone refits of part C (5 fits each)")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes (results do not "
+                    "depend on it: every draw has its own seeds)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs),
+                             initializer=_one_thread if args.jobs > 1 else None) as ex:
+        design = list(ex.map(design_draw, range(args.draws)))
+        refit = list(ex.map(refit_draw, range(args.refit_draws)))
+    res = {"design": design, "refit": refit, "runtime_s": round(time.perf_counter() - t0, 1),
+           "jobs": args.jobs}
+    args.out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(args.out / "mechanism.json") as tmp:
+        Path(tmp).write_text(json.dumps(res, indent=1))
+    write(res, args.out)
+    print(f"wrote {args.out / 'mechanism.md'} in {res['runtime_s']} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
