@@ -29,6 +29,15 @@ C. **Are held-out scores exchangeable with new trips' scores?** For each trainin
    folds, sharing nothing with the held-out trips). Extreme held-out scores
    (``p < 0.05``) are then split by how many trips of the same temperature and mode
    the fold's training trips hold.
+D. **What if the normalisation followed the temperature band?** A what-if, not the
+   library: each score is divided by a difficulty factor of its temperature band
+   (cold < 5 degC <= mild < 20 degC <= warm, the Mondrian bands), the band's mean
+   absolute out-of-fold score over all bands' (shrunk towards 1 by
+   :data:`SHRINK_TRIPS` pseudo-trips), estimated for each training trip from the
+   *other* folds' trips only (cross-fitted, so a trip's factor does not see its own
+   score) and for new trips from all of them; the CV+ interval then uses the fold
+   models' spreads times the new trip's factor. Coverage and width overall and by
+   temperature, on the same balanced fits as part B.
 
 Writes ``mechanism.md`` and ``.json`` to ``--out`` (default: this folder). Uses the
 private ``HybridModel._distributions``, ``_distribution`` and ``_cv_nets``.
@@ -51,11 +60,15 @@ import shift_and_small_data as ssd  # the truth of the size study
 
 from hybridev import HybridModel
 from hybridev.core.fileio import atomic_path
+from hybridev.learning.conformal import CVPlusConformal
+from hybridev.learning.mondrian import TEMPERATURE_BANDS_C
 
 HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
 N = 20
 TEMPS = (-5.0, 20.0, 32.0)  # the truth's temperatures (make_trips)
+SHRINK_TRIPS = 3.0
+"""Pseudo-trips at factor 1 in part D's band factors (a band of 3 trips moves half-way)."""
 
 
 def _test():
@@ -71,13 +84,37 @@ def _iid_draw(rep: int):
     return out
 
 
-def _fold_scores(model: HybridModel, x, y: np.ndarray, seed: int) -> np.ndarray:
-    """|y - mu_k| / s_k of each fold model on the trips ``x``, shape (n_folds, n_trips)."""
+def _fold_moments(model: HybridModel, x, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Predictive means and spreads of each fold model on ``x``, (n_folds, n_trips)."""
     _, d = model._distributions(x, seed=seed, nets=tuple(model._cv_nets()),
                                 physics=tuple(model.cv_physics_))
     mu = np.stack([q.mean() for q in d])
-    sd = np.maximum(np.stack([q.std() for q in d]), 1e-12)
-    return np.abs(y[None, :] - mu) / sd
+    return mu, np.maximum(np.stack([q.std() for q in d]), 1e-12)
+
+
+def _band(t) -> np.ndarray:
+    return np.searchsorted(TEMPERATURE_BANDS_C, np.asarray(t, float), side="right")
+
+
+def _band_factors(scores: np.ndarray, band: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Difficulty factor of each band (3,) from the scores of the trips ``use``."""
+    total = scores[use].mean()
+    out = np.ones(3)
+    for b in range(3):
+        sel = use & (band == b)
+        out[b] = (scores[sel].sum() + SHRINK_TRIPS * total) / (sel.sum() + SHRINK_TRIPS) / total
+    return out
+
+
+def band_normalised(cp: CVPlusConformal, band_train: np.ndarray, band_new: np.ndarray,
+                    mu: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Part D's CV+ interval with cross-fitted band difficulty factors."""
+    r = np.abs(cp.residuals)
+    g_train = np.array([_band_factors(r, band_train, cp.fold != cp.fold[i])[band_train[i]]
+                        for i in range(r.size)])
+    g_new = _band_factors(r, band_train, np.ones(r.size, dtype=bool))[band_new]
+    scaled = CVPlusConformal(cp.residuals / g_train, cp.fold)
+    return scaled.cv_interval(mu, sd * g_new[None, :], LEVEL)
 
 
 def design_draw(rep: int) -> dict:
@@ -99,12 +136,19 @@ def design_draw(rep: int) -> dict:
                 cp = model.conformal_
                 t_train = train["temperature_c"].to_numpy(float)
                 oof = np.abs(cp.residuals)
-                sc = _fold_scores(model, x, y, rep)
+                mu, sd = _fold_moments(model, x, rep)
+                sc = np.abs(y[None, :] - mu) / sd
+                blo, bhi = band_normalised(cp, _band(t_train), _band(t_test), mu, sd)
+                b_in = (y >= blo) & (y <= bhi)
+                row["band_coverage_in"] = float(b_in[ok].mean())
+                row["band_rel_width_in"] = float(np.mean((bhi - blo)[ok] / y[ok]))
                 for t in TEMPS:
                     sel = ok & (t_test == t)
                     row[f"coverage_{t:g}"] = float(inside[sel].mean())
                     row[f"rel_width_{t:g}"] = float(np.mean((hi - lo)[sel] / y[sel]))
                     row[f"test_score_{t:g}"] = float(sc[:, sel].mean())
+                    row[f"band_coverage_{t:g}"] = float(b_in[sel].mean())
+                    row[f"band_rel_width_{t:g}"] = float(np.mean((bhi - blo)[sel] / y[sel]))
                     m = t_train == t
                     row[f"oof_score_{t:g}"] = float(oof[m].mean()) if m.any() else None
                     row[f"n_train_{t:g}"] = int(m.sum())
@@ -214,6 +258,20 @@ def write(res: dict, out: Path) -> None:
     for lo_, hi_, label in ((0, 0, "0"), (1, 1, "1"), (2, 99, "2 or more")):
         lines.append(f"| {label} | {_cell_part([d['balanced']['held_out'] for d in a], lo_, hi_)}"
                      f" | {_cell_part([d['held_out'] for d in r], lo_, hi_)} |")
+    b = [d["balanced"] for d in a]
+    lines += ["", f"## D. What if: band-normalised scores (balanced draws, {len(b)} draws)", "",
+              "| test trips | library: coverage | library: width / energy | "
+              "band-normalised: coverage | band-normalised: width / energy |",
+              "|---|---|---|---|---|",
+              f"| all in-domain | {_ms([x['coverage_in'] for x in b])} | "
+              f"{_ms([x['rel_width_in'] for x in b])} | "
+              f"{_ms([x['band_coverage_in'] for x in b])} | "
+              f"{_ms([x['band_rel_width_in'] for x in b])} |"]
+    for t in TEMPS:
+        lines.append(f"| {t:g} degC | {_ms([x[f'coverage_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'rel_width_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'band_coverage_{t:g}'] for x in b])} | "
+                     f"{_ms([x[f'band_rel_width_{t:g}'] for x in b])} |")
     with atomic_path(out / "mechanism.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
 

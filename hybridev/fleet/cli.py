@@ -76,8 +76,23 @@ def run_predict(args) -> int:
             (Path(tmp) / MARKER).write_text(json.dumps(
                 {"command": "predict", "model": str(args.model), "trips": str(args.trips),
                  "rows": n, "what": what, "partitions": int(lazy.npartitions)}, indent=1))
+    _warn_out_of_domain(Path(args.out), n)
     print(f"wrote {n} {what} in {lazy.npartitions} partition(s) to {args.out}")
     return 0
+
+
+def _warn_out_of_domain(out: Path, n: int) -> None:
+    """Warn once, with the count, when written predictions hold out-of-domain rows."""
+    import pyarrow.parquet as pq
+
+    from hybridev.learning.domain import warn_out_of_domain
+
+    files = sorted(out.glob("*.parquet"))
+    if not files or "in_domain" not in pq.read_schema(files[0]).names:
+        return
+    n_out = sum(int((~pq.read_table(p, columns=["in_domain"])["in_domain"]
+                     .to_numpy(zero_copy_only=False)).sum()) for p in files)
+    warn_out_of_domain(n_out, n, stacklevel=3)
 
 
 def _rows(path: Path) -> int:

@@ -6,7 +6,11 @@
   holds one copy (not one per task).
 * **Explicit meta**: :func:`output_meta` runs the pandas method on one valid
   row built from the input's ``meta`` and keeps the empty frame, so the
-  columns and dtypes are exactly the pandas method's, and nothing is computed.
+  columns and dtypes are exactly the pandas method's, and nothing is computed
+  (its warnings, about a made-up row, are not shown). Text columns that come
+  in as dask's string dtype and pass through to the output (``vehicle_id``,
+  ``date``) leave with it again (:func:`restore_strings`): as plain objects,
+  dask could not tell parquet their type.
 * **Results independent of the partitioning**: all randomness in the
   predictions is keyed per trip (synthetic speed traces by ``(seed,
   trip_id)``, see :func:`hybridev.physics.kinematics.keyed_normals`) or
@@ -19,11 +23,13 @@
 from __future__ import annotations
 
 import uuid
+import warnings
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["KEY", "check_dask_frame", "output_meta", "plain_strings", "row_offsets", "shipped", "with_keys"]
+__all__ = ["KEY", "check_dask_frame", "output_meta", "plain_strings", "restore_strings",
+           "row_offsets", "shipped", "with_keys"]
 
 KEY = "trip_id"
 _VALID = {"distance_km": 10.0, "avg_speed_kmh": 40.0, "temperature_c": 15.0,
@@ -67,6 +73,15 @@ def plain_strings(part: pd.DataFrame) -> pd.DataFrame:
     return part.assign(**conv)
 
 
+def restore_strings(out: pd.DataFrame, dtypes: pd.Series) -> pd.DataFrame:
+    """``out`` with the string-extension dtype of ``dtypes`` (the input's) back on the
+    columns that passed through as plain objects (:func:`plain_strings`)."""
+    back = {c: dtypes[c] for c in out.columns
+            if c in dtypes.index and isinstance(dtypes[c], pd.StringDtype)
+            and out[c].dtype == object}
+    return out.astype(back) if back else out
+
+
 def with_keys(part: pd.DataFrame, offsets, partition_info) -> tuple[pd.DataFrame, bool]:
     """``part`` (strings plain) with a temporary ``trip_id`` = global row position (when
     offsets are given)."""
@@ -90,6 +105,10 @@ def sample_row(meta: pd.DataFrame) -> pd.DataFrame:
 
 
 def output_meta(fn, meta: pd.DataFrame, drop=()) -> pd.DataFrame:
-    """Empty frame with the columns and dtypes ``fn`` returns for a table like ``meta``."""
-    out = fn(plain_strings(sample_row(meta)))
-    return out.drop(columns=list(drop)).iloc[:0]
+    """Empty frame with the columns and dtypes ``fn`` returns for a table like ``meta``
+    (``fn``'s warnings about the made-up row are not shown)."""
+    row = sample_row(meta)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = fn(plain_strings(row))
+    return restore_strings(out.drop(columns=list(drop)), row.dtypes).iloc[:0]

@@ -22,6 +22,7 @@ from hybridev.fleet.partitions import (
     KEY,
     check_dask_frame,
     output_meta,
+    restore_strings,
     row_offsets,
     shipped,
     with_keys,
@@ -39,11 +40,12 @@ def _scalar(name: str, value) -> float:
 
 
 def _part(part: pd.DataFrame, model, kwargs: dict, offsets, partition_info=None):
+    dtypes = part.dtypes
     part, temp = with_keys(part, offsets, partition_info)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)
         out = predict_range(model, part, **kwargs)
-    return out.drop(columns=[KEY]) if temp else out
+    return restore_strings(out.drop(columns=[KEY]) if temp else out, dtypes)
 
 
 def predict_range_dask(model, conditions, *, soc_initial, soc_reserve=0.0,

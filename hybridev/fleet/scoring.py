@@ -12,6 +12,11 @@ Logged speed traces (``timeseries``) may be a pandas table or
 selects its trips' traces), or a dask DataFrame: then both tables are
 shuffled by ``trip_id`` into the same partitions first, so the output rows
 come in a different order (each keeps its ``trip_id``).
+
+Out-of-domain trips are marked in ``in_domain`` / ``domain_score`` as on pandas,
+but the lazy result does not warn (it cannot count them before it is computed):
+check ``(~out["in_domain"]).sum()``; ``hybridev predict`` on a data set warns once,
+with the count, after writing.
 """
 
 from __future__ import annotations
@@ -20,13 +25,14 @@ import warnings
 
 import pandas as pd
 
-from hybridev.core.errors import PhysicsFallbackWarning
+from hybridev.core.errors import OutOfDomainWarning, PhysicsFallbackWarning
 from hybridev.data.timeseries import as_traces
 from hybridev.fleet.partitions import (
     KEY,
     check_dask_frame,
     output_meta,
     plain_strings,
+    restore_strings,
     row_offsets,
     shipped,
     with_keys,
@@ -37,15 +43,22 @@ __all__ = ["predict_dask", "predict_interval_dask"]
 
 def _score(part: pd.DataFrame, model, method: str, kwargs: dict, offsets,
            traces=None, partition_info=None) -> pd.DataFrame:
-    """The pandas method on one partition (with partition-free trace keys)."""
+    """The pandas method on one partition (with partition-free trace keys).
+
+    Out-of-domain rows are marked (``in_domain``) but not warned about per partition:
+    the lazy result cannot count them before it is computed (the CLI warns once, with
+    the count, after writing).
+    """
+    dtypes = part.dtypes
     part, temp = with_keys(part, offsets, partition_info)
     if isinstance(traces, pd.DataFrame):  # a dask partition of the time series
         traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
                   if len(traces) else None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)  # warned once, up front
+        warnings.simplefilter("ignore", OutOfDomainWarning)  # the in_domain column
         out = getattr(model, method)(part, timeseries=traces, **kwargs)
-    return out.drop(columns=[KEY]) if temp else out
+    return restore_strings(out.drop(columns=[KEY]) if temp else out, dtypes)
 
 
 def _lazy(model, ddf, method: str, kwargs: dict, timeseries):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from hybridev.bayes.sampler import AUTO_GROUP_COLUMNS, auto_group_labels, group_labels
+from hybridev.bayes.groups import AUTO_GROUP_COLUMNS, auto_group_labels, group_labels
 
 __all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
 
@@ -30,7 +30,7 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
         :data:`AUTO_GROUP_COLUMNS` column of ``measured`` with two or more
         groups (missing labels a group each; none: one trip per group), as
         :func:`hybridev.calibrate_physics` does. A ``date`` column is taken at
-        day resolution (:func:`hybridev.bayes.sampler.group_labels`).
+        day resolution (:func:`hybridev.bayes.groups.group_labels`).
     measured : pandas.DataFrame or None
         The trip table (for a column name).
     n_trips : int

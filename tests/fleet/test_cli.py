@@ -76,3 +76,30 @@ def test_calibrate_by_vehicle(tmp_path, client, capsys):
     assert set(r.vehicle_id[r.flagged]) == set(v.vehicle_id[v.outlier != ""])
     assert r.hybrid_mape_pct.notna().sum() == 8
     assert "flagged" in capsys.readouterr().out
+
+
+def test_predict_keeps_text_columns_and_warns_once_with_the_count(tmp_path, fitted, client,
+                                                                   capsys):
+    """Pass-through text columns (a fleet's vehicle_id, date) survive the parquet writer
+    (they used to fail it: object columns in dask's meta), and out-of-domain trips are
+    warned about once, with their count, not per partition or for the meta row."""
+    fitted.save(tmp_path / "model")
+    (tmp_path / "trips").mkdir()
+    trips = make_trips(60, seed=4)
+    trips["vehicle_id"] = [f"v{i % 3}" for i in range(60)]
+    trips["date"] = "2024-01-0" + (trips.index % 9 + 1).astype(str)
+    trips.loc[:4, "temperature_c"] = -35.0  # 5 trips far outside the training domain
+    for k in range(3):
+        trips.iloc[k * 20:(k + 1) * 20].to_parquet(tmp_path / "trips" / f"p{k}.parquet",
+                                                   index=False)
+    rc = main(["predict", str(tmp_path / "model"), str(tmp_path / "trips" / "*.parquet"),
+               "--out", str(tmp_path / "preds"), "--scheduler", client.scheduler.address])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    got = pd.read_parquet(tmp_path / "preds").sort_values("trip_id").reset_index(drop=True)
+    assert got["vehicle_id"].tolist() == trips["vehicle_id"].tolist()
+    assert got["date"].tolist() == trips["date"].tolist()
+    n_out = int((~got["in_domain"]).sum())
+    assert n_out >= 5
+    assert err.count("OutOfDomainWarning") == 1
+    assert f"{n_out} of 60 trip(s)" in err

@@ -390,11 +390,10 @@ def evaluate_charging(charge_kw, dist, capacity_kwh: float,
 
 
 def _predict(model, table: pd.DataFrame, level: float):
-    """``model.predict_distribution(table, level=level)``, without ``level`` for a model
-    whose method takes none (any object with the method serves, see :func:`plan_charging`)."""
+    """``model.predict_distribution(table, level=level)``; without ``level`` if it takes none."""
     try:
         params = inspect.signature(model.predict_distribution).parameters.values()
-    except (TypeError, ValueError):  # a builtin or C callable: call it plainly
+    except (TypeError, ValueError):  # no signature to read: call it plainly
         params = ()
     if any(p.name == "level" or p.kind is p.VAR_KEYWORD for p in params):
         return model.predict_distribution(table, level=level)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from hybridev.cli.inputs import (
     add_input_arguments,
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"held-out ({sp['n_test']} trips): MAPE nominal {m['nominal']['mape_pct']:.1f} %, "
           f"calibrated {m['calibrated']['mape_pct']:.1f} %, hybrid "
           f"{m['hybrid']['mape_pct']:.1f} %; hybrid {args.level:.0%} coverage {cov:.2f}")
-    print(f"wrote report to {args.out}/report.html")
+    print(f"wrote report to {Path(args.out) / 'report.html'}")
     if args.save_model is not None:
         _save_model(args, summary, measured, vehicle)
     return 0
