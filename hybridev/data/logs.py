@@ -26,8 +26,13 @@ from hybridev.data.timeseries import (
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = ["TRACE_TOLERANCE", "MeasuredTrips", "harmonise_trip_ids", "match_traces",
+__all__ = ["TEMPERATURE_TOLERANCE_K", "TRACE_TOLERANCE", "MeasuredTrips", "harmonise_trip_ids", "match_traces",
            "measured_from_frames", "read_measured_trips"]
+
+TEMPERATURE_TOLERANCE_K = 10.0
+"""A trip's ``temperature_c`` this far (K) from its trace's mean ``amb_temp_c`` warns
+(:func:`match_traces`): a car's sensor and a weather record differ by a few K, degrees
+Fahrenheit read as Celsius by 10 K or more above -27 degC."""
 
 TRACE_TOLERANCE = 0.10
 """Largest relative difference allowed between a trip row and its logged trace:
@@ -96,6 +101,8 @@ def match_traces(trips: pd.DataFrame, traces: LoggedTraces | None, *, what: str 
             f"timeseries: none of its {len(traces)} trip_id value(s) (e.g. {ex_ts}) matches "
             f"a trip_id of the {what} (e.g. {ex_tr}); both files must use the same ids "
             "(spelled alike: '007' and 7 differ)")
+    if warn:
+        _check_temperatures(trips, traces, tid, what)
     if warn and not have.all():
         ids = tid[~have].head(5).tolist()
         warnings.warn(
@@ -103,6 +110,29 @@ def match_traces(trips: pd.DataFrame, traces: LoggedTraces | None, *, what: str 
             f"series (trip_id {', '.join(repr(v) for v in ids)}"
             f"{', ...' if (~have).sum() > 5 else ''}): their physics runs on a speed trace "
             "synthesised from distance_km and avg_speed_kmh", DataWarning, stacklevel=3)
+
+
+def _check_temperatures(trips: pd.DataFrame, traces: LoggedTraces, tid: pd.Series,
+                        what: str) -> None:
+    """Warn when trips' ``temperature_c`` is far from their trace's mean ``amb_temp_c``."""
+    if traces.temperature_c is None or "temperature_c" not in trips.columns or not len(traces):
+        return
+    pos = pd.Index(traces.trip_id).get_indexer(tid)
+    x = pd.to_numeric(trips["temperature_c"], errors="coerce").to_numpy(float)
+    ref = np.full(len(x), np.nan)
+    has = pos >= 0
+    with np.errstate(invalid="ignore"):
+        ref[has] = traces.per_trip_mean(traces.temperature_c)[pos[has]]
+        off = np.abs(x - ref) > TEMPERATURE_TOLERANCE_K
+    if off.any():
+        i = int(np.flatnonzero(off)[0])
+        warnings.warn(
+            f"{int(off.sum())} of {len(x)} {what} have a temperature_c more than "
+            f"{TEMPERATURE_TOLERANCE_K:g} K from their trace's mean amb_temp_c (first: "
+            f"trip_id={tid.iloc[i]!r}, temperature_c={x[i]:g} against {ref[i]:.1f} degC); "
+            "degrees Fahrenheit instead of Celsius? The physics uses the trace's "
+            "temperatures, the network and the domain check the table's", DataWarning,
+            stacklevel=4)
 
 
 def _trace_mismatch(trips: pd.DataFrame, traces: LoggedTraces) -> list[pd.DataFrame]:
@@ -284,12 +314,11 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
                 else pd.DataFrame(columns=REJECTED_COLUMNS))
     if traces is not None:
         orphan = ~pd.Index(traces.trip_id).isin(trips["trip_id"].astype(object))
-        if orphan.any():
-            ids = traces.trip_id[orphan]
-            rejected = pd.concat([rejected, pd.DataFrame({
-                "source": "timeseries", "row": None, "trip_id": ids, "field": "trip_id",
-                "value": ids, "reason": [f"trip_id={v!r} has a time series but no trip row"
-                                         for v in ids.tolist()]})], ignore_index=True)
+        if orphan.any():  # e.g. a whole year's trace export beside one season's trips
+            ids = list(traces.trip_id[orphan])
+            warnings.warn(f"the time series holds {len(ids)} trip(s) with no trip row, "
+                          f"ignored (e.g. trip_id={ids[0]!r}); only the trip table's trips "
+                          "are used", DataWarning, stacklevel=3)
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
         match_traces(good, traces)

@@ -32,9 +32,13 @@ import pandas as pd
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.validation import TRIP_RULES, FieldRule, check_table
 
-__all__ = ["MEASURED_RULES", "OUTCOME_COLUMNS", "validate_measured_trips"]
+__all__ = ["MAX_CAPACITY_SHARE", "MEASURED_RULES", "OUTCOME_COLUMNS", "validate_measured_trips"]
 
 OUTCOME_COLUMNS = ("energy_kwh", "soc_final")
+
+MAX_CAPACITY_SHARE = 1.5
+"""With a vehicle given, ``energy_kwh`` above this many battery capacities is a bad row
+(no trip uses it without charging on the way; the usual cause is a log in Wh)."""
 """Measured outcomes; a measured-trip table needs at least one."""
 
 MEASURED_RULES: dict[str, FieldRule] = {
@@ -56,7 +60,9 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
         Trip columns plus ``energy_kwh`` and/or ``soc_final``. ``mode`` is
         optional.
     vehicle : VehicleParams, optional
-        Supplies the capacity used to derive ``energy_kwh`` from SoC.
+        Supplies the capacity used to derive ``energy_kwh`` from SoC; when
+        given, a row with ``energy_kwh`` above :data:`MAX_CAPACITY_SHARE` x
+        the capacity is a bad row (a log in Wh read as kWh).
     on_error : {"raise", "collect"}
         ``"raise"``: a ``ValueError`` naming the first bad field, value and
         allowed range. ``"collect"``: bad rows are returned in ``rejected``
@@ -103,6 +109,22 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
             table = table.loc[~dup]
     good, rejected = check_table(table, required=_REQUIRED, rules=MEASURED_RULES,
                                  mode_required=False, on_error=on_error, what="measured trips")
+    if vehicle is not None and "energy_kwh" in good.columns:  # a log in Wh, read as kWh
+        cap = float(vehicle.battery_capacity_kwh)
+        e = good["energy_kwh"].to_numpy(float)
+        big = e > MAX_CAPACITY_SHARE * cap
+        if big.any():
+            i = int(np.flatnonzero(big)[0])
+            why = (f"above {MAX_CAPACITY_SHARE:g} x the battery capacity ({cap:g} kWh): no trip "
+                   "uses that much without charging; energy logged in Wh?")
+            if on_error == "raise":
+                raise ValueError(f"measured trips: {int(big.sum())} row(s) have energy_kwh "
+                                 f"{why}; first at row {good.index[i]!r}: "
+                                 f"energy_kwh={float(e[i]):g}")
+            extra.append(pd.DataFrame({
+                "row": good.index[big], "field": "energy_kwh", "value": e[big],
+                "reason": [f"energy_kwh={v:g} is {why}" for v in e[big].tolist()]}))
+            good = good.loc[~big]
     if "soc_final" in good.columns:
         s0 = good["soc_initial"].to_numpy(float)
         sf = good["soc_final"].to_numpy(float)
@@ -112,10 +134,11 @@ def validate_measured_trips(table: pd.DataFrame, vehicle: VehicleParams | None =
             if on_error == "raise":
                 raise ValueError(f"measured trips: {int(bad.sum())} row(s) have soc_final above "
                                  f"soc_initial; first at row {good.index[i]!r}: "
-                                 f"soc_final={sf[i]!r} > soc_initial={s0[i]!r}")
+                                 f"soc_final={round(float(sf[i]), 9)!r} > soc_initial={round(float(s0[i]), 9)!r} "
+                                 "(allowed: soc_final <= soc_initial; energy is not negative)")
             extra.append(pd.DataFrame({
                 "row": good.index[bad], "field": "soc_final", "value": sf[bad],
-                "reason": [f"soc_final={a!r} is above soc_initial={b!r}"
+                "reason": [f"soc_final={round(a, 9)!r} is above soc_initial={round(b, 9)!r}"
                            for a, b in zip(sf[bad].tolist(), s0[bad].tolist(), strict=True)]}))
             good = good.loc[~bad]
     if "energy_kwh" not in good.columns:

@@ -33,6 +33,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from hybridev.bayes.groups import group_labels
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.learning.model import HybridModel
 from hybridev.physics.stats import energy_from_stats
@@ -51,12 +52,15 @@ def split_trips(trips: pd.DataFrame, test_fraction: float, group_column: str | N
     n = len(trips)
     n_test_min = 1 if n >= 4 else 0
     for col, kind in (("date", "date"), (group_column, "group")):
-        if col and col in trips.columns and trips[col].nunique() >= 2:
-            groups = np.sort(trips[col].astype(str).unique())
+        if not (col and col in trips.columns):
+            continue
+        labels = group_labels(trips, col).astype(str)  # a date: its calendar day
+        if labels.nunique() >= 2:
+            groups = np.sort(labels.unique())
             if kind == "group":
                 groups = np.random.default_rng(seed).permutation(groups)
             k = max(round(test_fraction * len(groups)), n_test_min)
-            return trips[col].astype(str).isin(groups[len(groups) - k:]).to_numpy(), kind
+            return labels.isin(groups[len(groups) - k:]).to_numpy(), kind
     k = max(round(test_fraction * n), n_test_min)
     mask = np.zeros(n, bool)
     mask[np.random.default_rng(seed).permutation(n)[:k]] = True

@@ -185,7 +185,19 @@ def test_split_trips_groups_seed_and_errors():
     with pytest.raises(ValueError, match=r"test_fraction=1\.5"):
         R.split_trips(t, 1.5)
     with pytest.raises(ValueError, match="at least 2"):
-        R.split_trips(t.assign(session_group="x"), 0.2)
+        R.split_trips(t.assign(session_group="x"), 0.2, group_column="session_group")
+
+
+def test_split_trips_auto_holds_out_whole_days_of_timestamps():
+    """The default holds out calendar days (timestamps cut to the day), before sessions."""
+    stamps = [f"2024-0{1 + d // 4}-1{d % 4} 0{h}:15:00+01:00" for d in range(8) for h in (7, 9)]
+    t = pd.DataFrame({"date": stamps, "session_group": np.arange(16)})
+    m = R.split_trips(t, 0.25, seed=1)
+    day = pd.Series(stamps).str[:10]
+    for d, part in day.groupby(day):
+        assert m[part.index].all() or not m[part.index].any(), d  # whole days
+    assert m.sum() == 4  # 2 of 8 days
+    assert R.split_trips(t, 0.25, seed=1, group_column="date").tolist() == m.tolist()
 
 
 def test_figures_do_not_touch_the_global_backend(run):
@@ -269,3 +281,22 @@ def test_report_names_the_learned_heater():
     note = _heater_note({"hybrid": {"fit_info": fit}})
     assert "<b>heat_pump</b>" in note and "13.2" in note and "120 effective trips" in note
     assert _heater_note({"hybrid": {"fit_info": {"n_trips": 5}}}) == ""
+
+
+def test_cli_headline_says_unbounded_and_prints_the_fit_warnings(tmp_path, capsys):
+    """6 trips on 3 days (timestamps with a UTC offset): a day is held out, the 4 training
+    trips cannot calibrate 0.9, and the headline says so instead of "coverage 1.00"."""
+    from hybridev import make_dataset
+
+    d = make_dataset(6, truth="structured", seed=3, n_steps=N_STEPS)
+    d["date"] = [f"2024-01-0{i // 2 + 1} 08:0{i}:00+01:00" for i in range(6)]
+    d.to_csv(tmp_path / "tiny.csv", index=False)
+    code = main(["calibrate", str(tmp_path / "tiny.csv"), "--out", str(tmp_path / "r"),
+                 "--members", "2", "--max-epochs", "5", "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "held-out (2 trips)" in out  # one whole day of two trips
+    assert "coverage unbounded" in out
+    assert "hybridev calibrate: CalibrationWarning" in err
+    split = json.loads((tmp_path / "r" / "summary.json").read_text())["split"]
+    assert split["group_column"] == "date" and split["n_test_groups"] == 1

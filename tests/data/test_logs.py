@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hybridev.core.errors import DataWarning
 from hybridev.data.logs import (
     LoggedTraces,
     measured_from_frames,
@@ -83,11 +84,14 @@ def test_gap_longer_than_max_is_rejected_shorter_gap_kept():
 
 
 def test_orphan_and_duplicate_trip_ids_are_reported():
+    """A duplicate trip row is a bad row; a trace without a trip row (a whole year's
+    export beside one season's trips) is not: it is ignored with a DataWarning."""
     t = pd.concat([_trips(2), _trips(1)], ignore_index=True)  # t0 twice
-    m = measured_from_frames(t, _series(["t0", "t1", "zz"]))
+    with pytest.warns(DataWarning, match=r"1 trip\(s\) with no trip row, ignored.*'zz'"):
+        m = measured_from_frames(t, _series(["t0", "t1", "zz"]))
     assert list(m.trips.trip_id) == ["t0", "t1"]
     reasons = " | ".join(m.rejected.reason)
-    assert "duplicate trip_id='t0'" in reasons and "'zz' has a time series but no trip row" in reasons
+    assert "duplicate trip_id='t0'" in reasons and "zz" not in reasons
 
 
 def test_missing_trip_columns_are_derived_from_traces():
@@ -173,8 +177,9 @@ def test_no_pandas_warnings_on_report():
     ts.loc[ts.trip_id == "t2", "speed_kmh"] = -1.0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        warnings.simplefilter("ignore", DataWarning)  # ours: the orphan trace 'zz'
         m = measured_from_frames(t, ts)
-    assert list(m.trips.trip_id) == ["t1"] and m.n_rejected == 4
+    assert list(m.trips.trip_id) == ["t1"] and m.n_rejected == 3
 
 
 def test_zero_padded_ids_in_csv_match_parquet_traces(tmp_path):
@@ -223,3 +228,19 @@ def test_coarse_sampling_is_used_with_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)  # 1 Hz: no warning
         validate_timeseries(_series(["a"]))
+
+
+def test_fahrenheit_trip_temperatures_warn_against_the_trace():
+    """Trip temperatures in degF beside a trace logged in degC: a DataWarning naming the
+    first trip and both numbers; within the tolerance nothing is said."""
+    t = _trips(3).assign(temperature_c=[14.0, 50.0, 12.0])  # -10 / 10 degC in degF, 12 degC
+    ts = _series(["t0", "t1", "t2"])
+    ts["amb_temp_c"] = np.repeat([-10.0, 10.0, 12.0], 60)
+    with pytest.warns(DataWarning, match=r"2 of 3 trips have a temperature_c more than 10 K "
+                      r"from their trace's mean amb_temp_c \(first: trip_id='t0', "
+                      r"temperature_c=14 against -10.0 degC\); degrees Fahrenheit"):
+        m = measured_from_frames(t, ts)
+    assert len(m.trips) == 3  # kept: a warning, not a rejection
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        measured_from_frames(t.assign(temperature_c=[-8.0, 12.0, 12.0]), ts)

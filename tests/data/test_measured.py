@@ -104,3 +104,20 @@ def test_all_rows_rejected_raises_in_collect_mode():
     t = measured(2, soc_final=[0.95, 0.99])
     with pytest.raises(ValueError, match="all rows were rejected"):
         validate_measured_trips(t, on_error="collect")
+
+
+def test_energy_above_the_capacity_is_a_bad_row_hinting_wh():
+    """A log in Wh read as kWh: with the vehicle known, such rows are reported (the few
+    short trips under 1000 Wh would otherwise pass the (0, 1000] range as kWh)."""
+    from hybridev import make_trips
+
+    veh = VehicleParams(battery_capacity_kwh=60.0)
+    t = make_trips(4, seed=0).assign(energy_kwh=[8.0, 95.0, 450.0, 12.0])
+    good, rej = validate_measured_trips(t, veh, on_error="collect")
+    assert good["energy_kwh"].tolist() == [8.0, 12.0]
+    assert rej["field"].tolist() == ["energy_kwh", "energy_kwh"]
+    assert "energy_kwh=95 is above 1.5 x the battery capacity (60 kWh)" in rej["reason"].iloc[0]
+    assert "Wh?" in rej["reason"].iloc[0]
+    with pytest.raises(ValueError, match=r"2 row\(s\) have energy_kwh above.*energy_kwh=95"):
+        validate_measured_trips(t, veh)
+    assert len(validate_measured_trips(t)[0]) == 4  # no vehicle given: no capacity to judge by

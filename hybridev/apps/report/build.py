@@ -59,6 +59,7 @@ import pandas as pd
 
 from hybridev.apps.report.html import write_report
 from hybridev.apps.report.scoring import FLAG_FRACTION, REPORT_LEVELS, score_holdout
+from hybridev.bayes.groups import auto_group_column, group_labels
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
@@ -131,9 +132,11 @@ class HoldoutResult:
 
 
 def _groups(trips: pd.DataFrame, group_column: str | None) -> np.ndarray | None:
+    if group_column == "auto":
+        group_column = auto_group_column(trips)
     if not group_column or group_column not in trips.columns:
         return None
-    g = trips[group_column].astype(object)
+    g = group_labels(trips, group_column).astype(object)  # a date: its calendar day
     missing = g.isna().to_numpy()
     out = g.astype(str).to_numpy(object)
     out[missing] = [f"\0row{i}" for i in np.flatnonzero(missing)]  # each its own group
@@ -141,8 +144,13 @@ def _groups(trips: pd.DataFrame, group_column: str | None) -> np.ndarray | None:
 
 
 def split_trips(trips: pd.DataFrame, test_fraction: float = 0.2, *, seed: int = 0,
-                group_column: str | None = "session_group") -> np.ndarray:
+                group_column: str | None = "auto") -> np.ndarray:
     """Boolean test mask: whole groups held out when ``group_column`` exists, else random.
+
+    ``"auto"`` (default) holds out whole days (``date``, timestamps cut to the
+    calendar day), else whole ``session_group`` values, as ``fit(groups="auto")``
+    (:func:`hybridev.bayes.groups.auto_group_column`); a ``date`` column named
+    explicitly is cut to days too.
 
     Parameters
     ----------
@@ -160,7 +168,7 @@ def split_trips(trips: pd.DataFrame, test_fraction: float = 0.2, *, seed: int = 
     Examples
     --------
     >>> t = pd.DataFrame({"session_group": ["a", "a", "b", "b", "c"]})
-    >>> m = split_trips(t, 0.3, seed=0)
+    >>> m = split_trips(t, 0.3, seed=0)  # no date column: the sessions
     >>> int(m.sum()) in (1, 2), len(set(t.session_group[m])) == 1
     (True, True)
     """
@@ -333,7 +341,7 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
 def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str | os.PathLike,
                        vehicle: VehicleParams | None = None, seed: int = 0, level: float = 0.9,
                        n_members: int = 5, test_fraction: float = 0.2,
-                       group_column: str | None = "session_group",
+                       group_column: str | None = "auto",
                        physics_params: Sequence[str] = DEFAULT_PARAMS,
                        physics_missing_mode=None, model_params: dict | None = None,
                        calibrate_kwargs: dict | None = None, quiet: bool = True,
@@ -364,7 +372,9 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
     test_fraction : float in (0, 1)
         Share of groups (or trips) held out.
     group_column : str or None
-        Column of whole groups to hold out (ignored when absent).
+        Column of whole groups to hold out (ignored when absent); ``"auto"``
+        (default): ``date`` by calendar day, else ``session_group``, else a
+        random split (:func:`split_trips`).
     physics_params, physics_missing_mode, model_params, calibrate_kwargs
         See :func:`holdout_evaluation`.
     quiet : bool
@@ -408,6 +418,8 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
             bar.set_postfix_str(name)
             bar.update(1)
 
+        if group_column == "auto":
+            group_column = auto_group_column(measured.trips)
         test = split_trips(measured.trips, test_fraction, seed=seed, group_column=group_column)
         result = holdout_evaluation(
             measured, test, vehicle=vehicle, seed=seed, level=level, n_members=n_members,

@@ -31,9 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="at most this many training epochs (default 200)")
     p.add_argument("--test-fraction", type=float, default=0.2,
                    help="share of groups (or trips) held out for scoring (default 0.2)")
-    p.add_argument("--group-column", default="session_group",
-                   help="hold out whole groups of this column when present "
-                        "(default session_group; else a random split)")
+    p.add_argument("--group-column", default="auto",
+                   help="hold out whole groups of this column when present; a date column "
+                        "by calendar day (default auto: date, else session_group, else a "
+                        "random split)")
     p.add_argument("--save-model", default=None, metavar="DIR",
                    help="also fit the hybrid model on all valid trips (the report's settings) "
                         "and save it to DIR, for predict, range and plan-charging")
@@ -85,10 +86,16 @@ def run(args: argparse.Namespace) -> int:
         group_column=args.group_column, model_params={"max_epochs": args.max_epochs},
         quiet=args.quiet, source=str(args.measured))
     m, sp = summary["metrics"], summary["split"]
+    row = next((r for r in m["hybrid"].get("coverage_table", [])
+                if abs(r["nominal"] - args.level) < 1e-9), {})
     cov = m["hybrid"]["coverage"].get(f"{args.level:g}")
+    cov_text = ("unbounded (too few calibration trips for this level)" if row.get("unbounded")
+                else f"{cov:.2f}")
     print(f"held-out ({sp['n_test']} trips): MAPE nominal {m['nominal']['mape_pct']:.1f} %, "
           f"calibrated {m['calibrated']['mape_pct']:.1f} %, hybrid "
-          f"{m['hybrid']['mape_pct']:.1f} %; hybrid {args.level:.0%} coverage {cov:.2f}")
+          f"{m['hybrid']['mape_pct']:.1f} %; hybrid {args.level:.0%} coverage {cov_text}")
+    for w in summary.get("diagnostics", {}).get("warnings", []):  # also in the report
+        print(f"hybridev {NAME}: {w}", file=sys.stderr)
     print(f"wrote report to {Path(args.out) / 'report.html'}")
     if args.save_model is not None:
         _save_model(args, summary, measured, vehicle)
