@@ -649,9 +649,28 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             pred = self._combine(e_phys[val_idx], dev)
             info["val_mae_kwh_physics"] = float(np.mean(np.abs(e_meas[val_idx] - e_phys[val_idx])))
             info["val_mae_kwh_model"] = float(np.mean(np.abs(e_meas[val_idx] - pred)))
-        info["fit_seconds"] = round(time.perf_counter() - t0, 3)
         self.fit_info_ = info
+        if traces is not None and self.domain_.needs_trace:
+            info["trace_gap_rel"] = self._trace_gap(good, e_meas, traces)
+        info["fit_seconds"] = round(time.perf_counter() - t0, 3)
         return self
+
+    def _trace_gap(self, good: pd.DataFrame, e_meas: np.ndarray, traces) -> float:
+        """Root-mean-square log ratio of the measured energy to the prediction of the same
+        training trip *without* its logged trace (on a synthesised one), over the trips
+        that have a trace: the spread a trip predicted without its trace adds
+        (:mod:`hybridev.learning.ood`). In-sample for the network, so a lower bound of the
+        gap on new trips; what it measures is mostly how far the synthesised trace's
+        physics is from the driving logged (stop-and-go, speed variation)."""
+        has = good["trip_id"].astype(object).isin(pd.Index(traces.trip_id)).to_numpy()
+        if not has.any():
+            return 0.0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # every trip is out of the domain here
+            mu = self.predict(good.loc[has].drop(columns=["energy_kwh", "soc_final"],
+                                                 errors="ignore"))["energy_kwh_pred"]
+        ratio = e_meas[has] / np.maximum(mu.to_numpy(float), 1e-9)
+        return float(np.sqrt(np.mean(np.log(np.maximum(ratio, 1e-9)) ** 2)))
 
     def _conformal_mode(self, n_trips: int) -> str:
         """The conformal step a fit on ``n_trips`` trips runs: "split", "cv+" or "none"."""

@@ -22,7 +22,13 @@ model's own (conformally calibrated) one:
 * lacking the ``mode`` every training trip had: marginalised over the three
   modes: the spread between the three modes' predictions is added (no
   inflation);
-* lacking the logged trace most training trips had: a gap of 2.
+* lacking the logged trace most training trips had: a gap of 2, and the spread
+  ``trace_gap_rel * mu`` added in quadrature: ``fit_info_["trace_gap_rel"]`` is
+  the root-mean-square log ratio of the measured energy to the prediction of
+  the same training trip on a synthesised trace instead of its own (how far a
+  synthesised trace's physics is from how this car is driven: a stop-and-go
+  winter commute can use 15-20 % more than the smooth synthetic trace; a
+  lower bound, in-sample for the network).
 
 Intervals of such trips are ``mu +- z_level * sd_ood``, never narrower than
 the final model's own conformally calibrated interval ``mu +- q sd``. With
@@ -104,6 +110,9 @@ class OutOfDomainMixin:
         rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
         infl = TrainingDomain.inflation(gap)
         sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
+        trace_gap = float((getattr(self, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
+        if trace_gap > 0 and no_trace.any():  # what the missing trace alone can change
+            sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2 + (trace_gap * mu[no_trace]) ** 2)
         no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
                    else np.zeros(n, dtype=bool))
         if no_mode.any():

@@ -9,6 +9,7 @@ covered here for its fit bookkeeping and in ``test_uncertainty.py``.
 import hashlib
 import json
 import shutil
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -462,3 +463,33 @@ def test_fit_with_logged_traces_runs_the_posterior_on_them(small):
     assert np.all(out.energy_kwh_lo <= out.energy_kwh_hi)
     with pytest.raises(ValueError, match="timeseries"):
         m.predict(small.head(3), timeseries="not a table")
+
+
+def test_trips_without_their_trace_get_the_learned_trace_gap(small, tmp_path):
+    """A model fitted on logged traces records how far its predictions on synthesised
+    traces are from the measured energies (RMS log ratio over the training trips), and
+    widens the intervals of trips predicted without a trace by it; trips with their
+    trace are unchanged."""
+    ts = _logged(small, len(small))
+    m = HybridModel(n_steps=N_STEPS, max_epochs=2, n_members=2).fit(small, seed=0,
+                                                                      timeseries=ts)
+    gap = m.fit_info_["trace_gap_rel"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mu = m.predict(small.drop(columns=["energy_kwh"]))["energy_kwh_pred"].to_numpy()
+        ratio = small["energy_kwh"].to_numpy() / mu
+        assert gap == pytest.approx(np.sqrt(np.mean(np.log(ratio) ** 2)), rel=1e-9)
+        assert gap > 0.01
+        trips = small.drop(columns=["energy_kwh"]).head(10)
+        wide = m.predict_interval(trips, 0.9)
+        traced = m.predict_interval(trips, 0.9, timeseries=ts)
+        m.fit_info_["trace_gap_rel"] = 0.0
+        narrow = m.predict_interval(trips, 0.9)
+        pd.testing.assert_frame_equal(traced, m.predict_interval(trips, 0.9, timeseries=ts))
+    assert not wide["in_domain"].any() and traced["in_domain"].all()
+    w, n = (x.energy_kwh_hi - x.energy_kwh_lo for x in (wide, narrow))
+    assert (w > n).all()
+    np.testing.assert_allclose(wide.energy_kwh_pred, narrow.energy_kwh_pred)  # spread only
+    m.fit_info_["trace_gap_rel"] = gap
+    m.save(tmp_path / "m")
+    assert HybridModel.load(tmp_path / "m").fit_info_["trace_gap_rel"] == gap
