@@ -197,11 +197,16 @@ class MeasuredTrips:
         One row per rejected trip-table row or time-series trip: ``source``
         (``"trips"`` or ``"timeseries"``), ``row``, ``trip_id``, ``field``,
         ``value``, ``reason``.
+    vehicle : VehicleParams or None
+        The vehicle the trips were read and validated for (``vehicle=`` of
+        :func:`read_measured_trips`), if one was given: ``HybridModel.fit``
+        warns when its own vehicle is a different one.
     """
 
     trips: pd.DataFrame
     traces: LoggedTraces | None
     rejected: pd.DataFrame
+    vehicle: VehicleParams | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -215,7 +220,7 @@ class MeasuredTrips:
         if self.traces is not None:
             have = t["trip_id"].isin(self.traces.trip_id).to_numpy()
             tr = self.traces.select(t["trip_id"].to_numpy(object)[have])
-        return MeasuredTrips(t, tr, self.rejected)
+        return MeasuredTrips(t, tr, self.rejected, self.vehicle)
 
 
 def _derive_from_traces(trips: pd.DataFrame, traces: LoggedTraces) -> pd.DataFrame:
@@ -322,7 +327,7 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
         match_traces(good, traces)
-    return MeasuredTrips(good, traces, rejected)
+    return MeasuredTrips(good, traces, rejected, vehicle)
 
 
 def read_measured_trips(trips_path: str | os.PathLike,

@@ -568,6 +568,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         t0 = time.perf_counter()
         if isinstance(measured_trips, MeasuredTrips):
             traces = measured_trips.traces if timeseries is None else as_traces(timeseries)
+            _check_read_vehicle(measured_trips.vehicle, self.vehicle)
             measured_trips = measured_trips.trips
         else:
             traces = as_traces(timeseries)
@@ -792,6 +793,18 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             format or major version, wrong feature names or shapes).
         """
         return load_model(cls, path)
+
+
+def _check_read_vehicle(read_for: VehicleParams | None, own: VehicleParams | None) -> None:
+    """Warn when trips read for one vehicle are fitted with another (or the paper's)."""
+    if read_for is None or read_for == (own or _PAPER_VEHICLE):
+        return
+    what = ("has no vehicle, so it models the paper's" if own is None
+            else "has a different one")
+    warnings.warn(f"the measured trips were read for a vehicle (read_measured_trips("
+                  f"vehicle=...): battery {read_for.battery_capacity_kwh:g} kWh, mass "
+                  f"{read_for.mass_kg:g} kg) but this HybridModel {what}; pass the same "
+                  "VehicleParams as HybridModel(vehicle=...)", UserWarning, stacklevel=3)
 
 
 _ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",

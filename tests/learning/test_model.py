@@ -493,3 +493,20 @@ def test_trips_without_their_trace_get_the_learned_trace_gap(small, tmp_path):
     m.fit_info_["trace_gap_rel"] = gap
     m.save(tmp_path / "m")
     assert HybridModel.load(tmp_path / "m").fit_info_["trace_gap_rel"] == gap
+
+
+def test_fit_warns_when_trips_were_read_for_another_vehicle(small):
+    """read_measured_trips(vehicle=V) then HybridModel().fit(m): the model would silently
+    model the paper's vehicle; it warns, and not when the vehicles agree."""
+    from hybridev import VehicleParams
+    from hybridev.data.logs import MeasuredTrips
+
+    own = VehicleParams.from_coastdown(150.0, 0.5, 0.03, mass_kg=2100.0)
+    m = MeasuredTrips(small, None, small.iloc[:0], own)
+    with pytest.warns(UserWarning, match=r"read for a vehicle .*battery .* mass 2100 kg.* "
+                      r"has no vehicle, so it models the paper's"):
+        HybridModel(**PAPER, n_steps=N_STEPS, max_epochs=1).fit(m, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        HybridModel(**PAPER, vehicle=own, n_steps=N_STEPS, max_epochs=1).fit(m, seed=0)
+    assert m.select(np.ones(len(small), dtype=bool)).vehicle is own
