@@ -485,9 +485,12 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         out[quantile_column("range_km", qi)] = rq
     if getattr(model, "domain_", None) is not None:  # conditions at the median range
         mid = ranges[len(ranges) // 2]
-        score, ok = model.domain_.score(base.assign(distance_km=mid))
+        at = base.assign(distance_km=mid)
+        score, ok = model.domain_.score(at)
         out["in_domain"], out["domain_score"] = ok, score
-        warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=2)
+        if (~ok).any():
+            warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=2,
+                               reasons=model.domain_.reasons(at))
     return out
 
 

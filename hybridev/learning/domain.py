@@ -64,6 +64,8 @@ DOMAIN_QUANTITIES = ("temperature_c", "avg_speed_kmh", "log_distance", "log_dura
 DOMAIN_TOLERANCES = (3.0, 8.0, float(np.log(1.5)), float(np.log(1.5)), 1.0)
 """Gap (in the quantity's unit) that makes a trip leave the domain, per quantity."""
 
+_REASON_NAMES = ("temperature", "speed", "distance", "duration", "grade")
+
 EDGE_FRACTION = 1.0 / 3.0
 """Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 degC, ...):
 extrapolating is riskier than interpolating between training values."""
@@ -196,6 +198,34 @@ class TrainingDomain:
             miss |= ~domain_quantities(table, traces)[1]
         return miss
 
+    def reasons(self, table: pd.DataFrame, traces=None) -> dict[str, int]:
+        """Trips outside the domain per reason (a trip may count under several).
+
+        Examples
+        --------
+        >>> d = TrainingDomain.fit(pd.DataFrame({"distance_km": [10.0, 20.0],
+        ...     "avg_speed_kmh": [50.0, 60.0], "temperature_c": [20.0, 22.0]}), np.zeros((2, 1)))
+        >>> d.reasons(pd.DataFrame({"distance_km": [15.0, 15.0], "avg_speed_kmh": [55.0, 55.0],
+        ...     "temperature_c": [-10.0, 21.0]}))
+        {'temperature': 1}
+        """
+        out = {}
+        if len(table):
+            g = self.gaps(table, traces) > 1.0
+            for j, name in enumerate(_REASON_NAMES):
+                if g[:, j].any():
+                    out[name] = int(g[:, j].sum())
+        if self.needs_mode:
+            miss = (pd.isna(table["mode"].to_numpy(dtype=object)) if "mode" in table.columns
+                    else np.ones(len(table), dtype=bool))
+            if miss.any():
+                out["missing mode"] = int(miss.sum())
+        if self.needs_trace:
+            miss = ~domain_quantities(table, traces)[1]
+            if miss.any():
+                out["missing logged trace"] = int(miss.sum())
+        return out
+
     def score(self, table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
         """``(domain_score, in_domain)`` per trip, shapes (n_trips,).
 
@@ -276,12 +306,16 @@ class TrainingDomain:
             raise ValueError(f"training domain: array {exc} is missing") from exc
 
 
-def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3) -> None:
-    """Warn (:class:`~hybridev.core.errors.OutOfDomainWarning`) when ``n_out > 0``."""
+def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3,
+                       reasons: dict[str, int] | None = None) -> None:
+    """Warn (:class:`~hybridev.core.errors.OutOfDomainWarning`) when ``n_out > 0``;
+    ``reasons`` (:meth:`TrainingDomain.reasons`) says which conditions, with counts."""
     if n_out:
+        why = (f" (here: {', '.join(f'{k} {v}' for k, v in reasons.items())})"
+               if reasons else "")
         warnings.warn(
             f"{n_out} of {n_trips} trip(s) lie outside the conditions the model was trained "
             "on (temperature, speed, distance, duration, grade, or a missing mode / logged "
-            "trace it was trained with): see the in_domain and domain_score columns; their "
-            "intervals come from the physics posterior predictive, widened",
+            f"trace it was trained with){why}: see the in_domain and domain_score columns; "
+            "their intervals come from the physics posterior predictive, widened",
             OutOfDomainWarning, stacklevel=stacklevel)

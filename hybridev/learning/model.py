@@ -759,7 +759,9 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             cols["domain_score"], cols["in_domain"] = (
                 self.domain_.score(table, traces) if traces is not None
                 else self.domain_._score_columns(arr, n))
-            warn_out_of_domain(int((~cols["in_domain"]).sum()), n)
+            n_out = int((~cols["in_domain"]).sum())
+            if n_out:
+                warn_out_of_domain(n_out, n, reasons=self.domain_.reasons(table, traces))
         return append_columns(table, cols)  # one step: column inserts are slow on one trip
 
     # -- persistence ----------------------------------------------------------------------

@@ -78,7 +78,10 @@ class OutOfDomainMixin:
         """
         score, ok, sd_ood = self._ood_sd(table, dist.mean(), dist.std(),
                                          dist.physics_draws_kwh.var(axis=0), traces, dist=dist)
-        warn_out_of_domain(int((~ok).sum()), dist.n_trips, stacklevel=4)
+        n_out = int((~ok).sum())
+        if n_out:
+            warn_out_of_domain(n_out, dist.n_trips, stacklevel=4,
+                               reasons=self.domain_.reasons(table, traces))
         return score, ok, sd_ood
 
     def _ood_sd(self, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray,

@@ -79,6 +79,8 @@ def test_model_flags_cold_trips_widens_them_and_warns_once(warm):
         out = m.predict_interval(test, 0.9)
     assert sum(issubclass(w.category, OutOfDomainWarning) for w in rec) == 1
     cold = (test.temperature_c < 0).to_numpy()
+    msg = str(next(w.message for w in rec if issubclass(w.category, OutOfDomainWarning)))
+    assert f"(here: temperature {int(cold.sum())}" in msg  # says why, with the count
     assert not out.in_domain[cold].any()  # every trip at -5 degC is flagged
     rel = (out.energy_kwh_hi - out.energy_kwh_lo) / out.energy_kwh_pred
     assert rel[cold].median() > 1.5 * rel[out.in_domain].median()
