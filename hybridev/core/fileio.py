@@ -70,7 +70,7 @@ def read_table(path: str | os.PathLike, *, option: str | None = None,
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             return pd.read_parquet(path)
-        return pd.read_csv(path, dtype=dict.fromkeys(text_columns, str) or None)
+        table = pd.read_csv(path, dtype=dict.fromkeys(text_columns, str) or None)
     except pd.errors.EmptyDataError as exc:
         raise ValueError(f"{what} is empty (no header row)") from exc
     except (OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:
@@ -79,6 +79,12 @@ def read_table(path: str | os.PathLike, *, option: str | None = None,
     except Exception as exc:  # pyarrow raises its own errors for a damaged file
         raise ValueError(f"could not read {str(path)!r} as a table: "
                          f"{type(exc).__name__}: {exc}") from exc
+    if len(table.columns) == 1 and any(c in str(table.columns[0]) for c in ";\t"):
+        sep = "';'" if ";" in str(table.columns[0]) else "tabs"
+        raise ValueError(f"{what}: one column {str(table.columns[0])[:60]!r}: the file is "
+                         f"separated by {sep}, but CSV files are read comma-separated (with "
+                         "'.' as the decimal point); save it as comma-separated CSV")
+    return table
 
 
 def write_table(df: pd.DataFrame, path: str | os.PathLike, *, option: str = "--out") -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 
 from hybridev.cli.inputs import (
     add_input_arguments,
@@ -56,6 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hybridev.apps.charging.plan import plan_charging
+    from hybridev.core.errors import OutOfDomainWarning
     from hybridev.core.fileio import read_table, write_table
     from hybridev.core.outputs import TABLE_SUFFIXES, check_output
 
@@ -74,11 +76,17 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.learning.model import HybridModel
 
     model = model_with_vehicle(HybridModel.load(args.model), args)
-    result = plan_charging(
-        model, schedule, soc_now=args.soc_now, tariff=tariff, charger_kw=args.charger_kw,
-        charge_efficiency=args.efficiency, soc_min=args.soc_min, soc_max=args.soc_max,
-        risk=args.risk, method=args.method, n_samples=args.n_samples, n_eval=args.n_eval,
-        level=args.level, seed=args.seed, risk_neutral=args.risk_neutral)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = plan_charging(
+            model, schedule, soc_now=args.soc_now, tariff=tariff, charger_kw=args.charger_kw,
+            charge_efficiency=args.efficiency, soc_min=args.soc_min, soc_max=args.soc_max,
+            risk=args.risk, method=args.method, n_samples=args.n_samples, n_eval=args.n_eval,
+            level=args.level, seed=args.seed, risk_neutral=args.risk_neutral)
+    for w in caught:  # shown as usual; the per-trip columns are in --trips-out only
+        hint = ("; they are written per trip with --trips-out" if
+                issubclass(w.category, OutOfDomainWarning) and not args.trips_out else "")
+        warnings.warn_explicit(f"{w.message}{hint}", w.category, w.filename, w.lineno)
     print(result.summary())
     write_table(result.plan, args.out)
     print(f"wrote {len(result.plan)} slots to {args.out}")
