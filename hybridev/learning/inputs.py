@@ -5,6 +5,7 @@ scalar settings (each error names the field, the value and the allowed range).
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -12,9 +13,10 @@ import pandas as pd
 from hybridev.learning.features import (
     normalize_modes,
 )
+from hybridev.physics.params import VehicleParams
 from hybridev.physics.validation import TRIP_RULES, check_table
 
-__all__ = ["unpack_trips", "validate_prediction_trips"]
+__all__ = ["check_read_vehicle", "unpack_trips", "validate_prediction_trips"]
 
 
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
@@ -66,3 +68,15 @@ def unpack_trips(trips, timeseries=None):
     if isinstance(trips, MeasuredTrips):
         return trips.trips, (trips.traces if timeseries is None else as_traces(timeseries))
     return trips, as_traces(timeseries)
+
+
+def check_read_vehicle(read_for: VehicleParams | None, own: VehicleParams | None) -> None:
+    """Warn when trips read for one vehicle are fitted with another (or the paper's)."""
+    if read_for is None or read_for == (own or VehicleParams()):
+        return
+    what = ("has no vehicle, so it models the paper's" if own is None
+            else "has a different one")
+    warnings.warn(f"the measured trips were read for a vehicle (read_measured_trips("
+                  f"vehicle=...): battery {read_for.battery_capacity_kwh:g} kWh, mass "
+                  f"{read_for.mass_kg:g} kg) but this HybridModel {what}; pass the same "
+                  "VehicleParams as HybridModel(vehicle=...)", UserWarning, stacklevel=3)
