@@ -108,8 +108,11 @@ def make_fleet(n_vehicles: int = 100, trips_per_vehicle: int = 60, *, seed: int 
     n_steps : int
         Intervals per synthesised truth trace.
     with_traces : bool
-        Also return the 1 Hz-like speed traces (``trip_id``, ``t_s``,
-        ``speed_kmh``) the truth was computed on.
+        Also return the speed traces (``trip_id``, ``t_s``, ``speed_kmh``) the
+        truth was computed on: ``n_steps`` intervals per trip, so a long trip is
+        sampled more coarsely than 1 Hz (the coarse-sampling ``DataWarning`` of
+        :func:`hybridev.data.timeseries.validate_timeseries` then applies; the
+        truth used the same samples, so nothing is smoothed away against it).
 
     Returns
     -------
