@@ -115,9 +115,9 @@ class OutOfDomainMixin:
         rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
         infl = TrainingDomain.inflation(gap)
         sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
-        trace_gap = float((getattr(self, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
-        if trace_gap > 0 and no_trace.any():  # what the missing trace alone can change
-            sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2 + (trace_gap * mu[no_trace]) ** 2)
+        gap_rel = float((getattr(self, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
+        if gap_rel > 0 and no_trace.any():  # what the missing trace alone can change
+            sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2 + (gap_rel * mu[no_trace]) ** 2)
         no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
                    else np.zeros(n, dtype=bool))
         if no_mode.any():
