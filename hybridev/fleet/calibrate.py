@@ -27,10 +27,13 @@ from their own trips under the default prior, for comparison.
 from __future__ import annotations
 
 import time
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from hybridev.core.errors import DataWarning
 from hybridev.data.measured import validate_measured_trips
 from hybridev.fleet.borrowing import fleet_hyperparameters, fleet_prior
 from hybridev.fleet.report import flag_vehicles, write_report
@@ -93,7 +96,13 @@ def calibrate_fleet(measured: pd.DataFrame, *, by: str = "vehicle_id",
     Raises
     ------
     ValueError
-        Naming the field: missing ``by`` column, bad rows, bad settings.
+        Naming the field: missing ``by`` column, bad settings, no valid row at all.
+
+    Warns
+    -----
+    DataWarning
+        Bad rows (invalid values, energy above 1.5 x the capacity: a log in Wh) are
+        left out, counted and listed in ``rejected.csv`` of ``out_dir``.
     """
     if not isinstance(measured, pd.DataFrame) or by not in measured.columns:
         raise ValueError(f"measured trips need a {by!r} column (--by) naming the vehicle; "
@@ -105,7 +114,7 @@ def calibrate_fleet(measured: pd.DataFrame, *, by: str = "vehicle_id",
     if measured[by].isna().any():
         raise ValueError(f"{by}: {int(measured[by].isna().sum())} row(s) without a vehicle")
     vehicle = vehicle or VehicleParams()
-    validate_measured_trips(measured, vehicle, on_error="raise")
+    measured, rejected = _drop_bad_rows(measured, vehicle, by)
     import dask
 
     t0 = time.perf_counter()
@@ -138,8 +147,27 @@ def calibrate_fleet(measured: pd.DataFrame, *, by: str = "vehicle_id",
     meta = {"by": by, "level": level, "seed": seed, "test_fraction": test_fraction,
             "fit_model": fit_model, "borrow": borrow, "min_trips": min_trips,
             "fleet_prior": hyper, "n_borrowing": len(small) if hyper else 0,
-            "seconds": round(time.perf_counter() - t0, 2)}
+            "seconds": round(time.perf_counter() - t0, 2), "n_rejected": len(rejected)}
     report.attrs.update(meta)
     if out_dir is not None:
         write_report(report, out_dir, meta)
+        if len(rejected):
+            rejected.to_csv(Path(out_dir) / "rejected.csv", index=False)
     return report
+
+
+def _drop_bad_rows(measured: pd.DataFrame, vehicle: VehicleParams, by: str
+                   ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The valid rows, and the bad ones with their vehicle and reason (a DataWarning
+    with the count; ``rejected.csv`` in the report): one bad row, or a vehicle logged in
+    Wh, does not stop the fleet. Rows are numbered as in ``measured``."""
+    good, rejected = validate_measured_trips(measured, vehicle, on_error="collect")
+    if len(rejected):
+        rejected = rejected.assign(**{by: measured.loc[rejected["row"], by].to_numpy()})
+        vehicles = rejected[by].astype(str).unique().tolist()
+        first = rejected.iloc[0]
+        warnings.warn(f"{len(rejected)} bad row(s) of {len(vehicles)} vehicle(s) are left out "
+                      f"(e.g. row {first['row']} of {by}={first[by]!r}: {first['reason']}); "
+                      "they are listed in rejected.csv of the report", DataWarning,
+                      stacklevel=3)
+    return measured.loc[measured.index.isin(good.index)], rejected

@@ -17,6 +17,7 @@ from __future__ import annotations
 import glob
 import json
 import os
+import sys
 from pathlib import Path
 
 from hybridev.core.fileio import atomic_dir
@@ -113,9 +114,16 @@ def run_calibrate_by(args) -> int:
     from hybridev.fleet.calibrate import calibrate_fleet
     from hybridev.fleet.cluster import cluster_client
 
+    unsupported = [f"--{o.replace('_', '-')}" for o in ("timeseries", "save_model", "columns",
+                                                         "columns_file", "soc_initial")
+                   if getattr(args, o, None) is not None]
+    if unsupported:
+        raise ValueError(f"{', '.join(unsupported)}: not supported with --by (fleet "
+                         "calibration reads the trip table as it is); calibrate one vehicle "
+                         "without --by to use them")
     vehicle = vehicle_from_args(args)
     if is_dataset(args.measured):
-        measured = _read(args.measured, "measured").compute()
+        measured = _read(args.measured, "measured").compute().reset_index(drop=True)
     else:
         measured = read_table(args.measured)
     for c, d in measured.dtypes.items():  # dask reads strings as pyarrow strings
@@ -132,6 +140,9 @@ def run_calibrate_by(args) -> int:
             {"command": "calibrate", "by": args.by, "measured": str(args.measured),
              "vehicles": len(report)}, indent=1))
     flagged = report.loc[report["flagged"], args.by].astype(str).tolist()
+    if report.attrs.get("n_rejected"):
+        print(f"left out {report.attrs['n_rejected']} bad row(s), listed in "
+              f"{Path(args.out) / 'rejected.csv'}", file=sys.stderr)
     print(f"calibrated {len(report)} vehicles by {args.by!r} in "
           f"{report.attrs['seconds']:.0f} s; {report.attrs['n_borrowing']} borrowed strength "
           f"from the fleet prior; flagged: {', '.join(flagged) if flagged else 'none'}")

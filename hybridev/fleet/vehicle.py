@@ -51,6 +51,8 @@ def split_trips(trips: pd.DataFrame, test_fraction: float, group_column: str | N
     """Boolean test mask and the split used (``"date"``, ``"group"`` or ``"trip"``)."""
     n = len(trips)
     n_test_min = 1 if n >= 4 else 0
+    if group_column == "auto":  # as fit(groups="auto"): days, else sessions
+        group_column = "session_group"
     for col, kind in (("date", "date"), (group_column, "group")):
         if not (col and col in trips.columns):
             continue

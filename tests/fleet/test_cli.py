@@ -67,15 +67,23 @@ def test_calibrate_by_vehicle(tmp_path, client, capsys):
     from hybridev.fleet.synth import make_fleet, write_fleet
 
     v, t = make_fleet(9, 40, seed=5, n_outliers=3, n_small=1)
+    ordinary = v.vehicle_id[(v.outlier == "") & (v.n_trips == 40)].iloc[0]
+    bad = int(np.flatnonzero(t.vehicle_id == ordinary)[0])
+    t.loc[bad, "energy_kwh"] = 0.0  # one bad row: reported, the fleet still calibrated
     write_fleet(tmp_path / "fleet", v, t, rows_per_file=100)
     rc = main(["calibrate", str(tmp_path / "fleet" / "trips"), "--by", "vehicle_id",
                "--out", str(tmp_path / "rep"), "--scheduler", client.scheduler.address,
                "--members", "2", "--max-epochs", "10"])
-    assert rc == 0
+    out, err = capsys.readouterr()
+    assert rc == 0, err
     r = pd.read_csv(tmp_path / "rep" / "fleet_report.csv")
     assert set(r.vehicle_id[r.flagged]) == set(v.vehicle_id[v.outlier != ""])
     assert r.hybrid_mape_pct.notna().sum() == 8
-    assert "flagged" in capsys.readouterr().out
+    assert "flagged" in out
+    rej = pd.read_csv(tmp_path / "rep" / "rejected.csv")
+    assert rej["vehicle_id"].tolist() == [ordinary] and rej["field"].tolist() == ["energy_kwh"]
+    assert rej["row"].tolist() == [bad]  # the row of the whole data set, not of a partition
+    assert "left out 1 bad row(s)" in err
 
 
 def test_predict_keeps_text_columns_and_warns_once_with_the_count(tmp_path, fitted, client,
@@ -103,3 +111,17 @@ def test_predict_keeps_text_columns_and_warns_once_with_the_count(tmp_path, fitt
     assert n_out >= 5
     assert err.count("OutOfDomainWarning") == 1
     assert f"{n_out} of 60 trip(s)" in err
+
+
+def test_calibrate_by_refuses_options_it_cannot_use(tmp_path, capsys):
+    """--timeseries, --save-model, --columns, --soc-initial are not read by the fleet path:
+    exit 2 naming them, before any work, rather than a report that silently ignored them."""
+    make_trips(4, seed=0).assign(vehicle_id="a", energy_kwh=5.0).to_csv(tmp_path / "m.csv",
+                                                                          index=False)
+    rc = main(["calibrate", str(tmp_path / "m.csv"), "--by", "vehicle_id", "--out",
+               str(tmp_path / "r"), "--timeseries", str(tmp_path / "ts.csv"),
+               "--soc-initial", "0.9"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--timeseries, --soc-initial: not supported with --by" in err
+    assert not (tmp_path / "r").exists()
