@@ -26,8 +26,8 @@ from hybridev.data.timeseries import (
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.traces import LoggedTraces
 
-__all__ = ["TEMPERATURE_TOLERANCE_K", "TRACE_TOLERANCE", "MeasuredTrips", "harmonise_trip_ids", "match_traces",
-           "measured_from_frames", "read_measured_trips"]
+__all__ = ["TEMPERATURE_TOLERANCE_K", "TRACE_TOLERANCE", "MeasuredTrips", "harmonise_trip_ids",
+           "match_traces", "measured_from_frames", "read_measured_trips"]
 
 TEMPERATURE_TOLERANCE_K = 10.0
 """A trip's ``temperature_c`` this far (K) from its trace's mean ``amb_temp_c`` warns
