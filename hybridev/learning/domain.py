@@ -189,14 +189,21 @@ class TrainingDomain:
 
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
         """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
-        n = len(table)
-        miss = np.zeros(n, dtype=bool)
-        if self.needs_mode:  # on the cells: Series operations are slow on a single trip
-            miss |= (pd.isna(table["mode"].to_numpy(dtype=object)) if "mode" in table.columns
-                     else np.ones(n, dtype=bool))
-        if self.needs_trace:
-            miss |= ~domain_quantities(table, traces)[1]
+        miss = np.zeros(len(table), dtype=bool)
+        for lacking in self._missing(table, traces).values():
+            miss |= lacking
         return miss
+
+    def _missing(self, table: pd.DataFrame, traces=None) -> dict[str, np.ndarray]:
+        """Per trained-with input (``"mode"``, ``"logged trace"``): trips lacking it."""
+        n = len(table)
+        out = {}
+        if self.needs_mode:  # on the cells: Series operations are slow on a single trip
+            out["mode"] = (pd.isna(table["mode"].to_numpy(dtype=object))
+                           if "mode" in table.columns else np.ones(n, dtype=bool))
+        if self.needs_trace:
+            out["logged trace"] = ~domain_quantities(table, traces)[1]
+        return out
 
     def reasons(self, table: pd.DataFrame, traces=None) -> dict[str, int]:
         """Trips outside the domain per reason (a trip may count under several).
@@ -215,15 +222,9 @@ class TrainingDomain:
             for j, name in enumerate(_REASON_NAMES):
                 if g[:, j].any():
                     out[name] = int(g[:, j].sum())
-        if self.needs_mode:
-            miss = (pd.isna(table["mode"].to_numpy(dtype=object)) if "mode" in table.columns
-                    else np.ones(len(table), dtype=bool))
-            if miss.any():
-                out["missing mode"] = int(miss.sum())
-        if self.needs_trace:
-            miss = ~domain_quantities(table, traces)[1]
-            if miss.any():
-                out["missing logged trace"] = int(miss.sum())
+        for name, lacking in self._missing(table, traces).items():
+            if lacking.any():
+                out[f"missing {name}"] = int(lacking.sum())
         return out
 
     def score(self, table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
