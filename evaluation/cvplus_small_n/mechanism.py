@@ -39,6 +39,14 @@ D. **What if the normalisation followed the temperature band?** A what-if, not t
    models' spreads times the new trip's factor. Coverage and width overall and by
    temperature, on the same balanced fits as part B.
 
+E. **Is it how CV+ combines the fold models?** The same 20 out-of-fold scores and
+   their pooled threshold ``q`` (the 19th smallest), combined with the fold models in
+   five ways: the CV+ interval; each fold model alone (``mu_k +- q s_k``, coverage
+   averaged over the folds); the mean of the fold models; the final model; Vovk's
+   cross-conformal set. If combining were the cause, each fold model alone would cover
+   about ``19/21 = 0.905``. Also the CV+ coverage of every test trip (no
+   out-of-domain widening), and the share flagged out of the domain.
+
 Writes ``mechanism.md`` and ``.json`` to ``--out`` (default: this folder). Uses the
 private ``HybridModel._distributions``, ``_distribution`` and ``_cv_nets``.
 """
@@ -67,8 +75,15 @@ HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
 N = 20
 TEMPS = (-5.0, 20.0, 32.0)  # the truth's temperatures (make_trips)
+K_TH = int(np.ceil((N + 1) * LEVEL))  # the pooled threshold's rank (19 of 20)
 SHRINK_TRIPS = 3.0
 """Pseudo-trips at factor 1 in part D's band factors (a band of 3 trips moves half-way)."""
+
+
+def _beta_sd() -> float:
+    """Sd of Beta(K_TH, N + 1 - K_TH): one draw's coverage under exchangeability."""
+    a, b = K_TH, N + 1 - K_TH
+    return float(np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1))))
 
 
 def _test():
@@ -153,8 +168,43 @@ def design_draw(rep: int) -> dict:
                     row[f"oof_score_{t:g}"] = float(oof[m].mean()) if m.any() else None
                     row[f"n_train_{t:g}"] = int(m.sum())
                 row["held_out"] = _held_out_rows(train, cp.fold, oof, sc[:, ok])
+                row.update(_aggregation(model, cp, x, y, ok, mu, sd, sc, rep))
             out[design] = row
     return out
+
+
+def _aggregation(model: HybridModel, cp: CVPlusConformal, x, y: np.ndarray, ok: np.ndarray,
+                 mu: np.ndarray, sd: np.ndarray, sc: np.ndarray, rep: int) -> dict:
+    """Part E: the same 20 scores, combined with the fold models in five ways."""
+    k = int(np.ceil((cp.n_calibration + 1) * LEVEL))
+    q = np.sort(np.abs(cp.residuals))[k - 1]  # the pooled threshold (19th of 20)
+    out = {}
+    lo, hi = cp.cv_interval(mu, sd, LEVEL)
+    out["E_cvplus"] = ((y >= lo) & (y <= hi), hi - lo)
+    per = np.abs(y[None, :] - mu) <= q * sd  # (K, m): each fold model alone
+    out["E_per_fold"] = (per.mean(axis=0), 2 * q * sd.mean(axis=0))
+    mb, sb = mu.mean(axis=0), sd.mean(axis=0)
+    out["E_fold_mean"] = (np.abs(y - mb) <= q * sb, 2 * q * sb)
+    _, d = model._distribution(x, seed=rep)
+    mf, sf = d.mean(), np.maximum(d.std(), 1e-12)
+    out["E_final"] = (np.abs(y - mf) <= q * sf, 2 * q * sf)
+    # Vovk's cross-conformal set {y: (1 + #{i: |r_i| >= score of y under fold k(i)}) / (n + 1)
+    # > alpha}; coverage only (its set need not be an interval)
+    count = (np.abs(cp.residuals)[:, None] >= sc[cp.fold]).sum(axis=0)
+    out["E_cross"] = ((1 + count) / (cp.n_calibration + 1) > 1 - LEVEL, None)
+    row = {}
+    for name, (cov, width) in out.items():
+        row[f"{name}_coverage"] = float(np.mean(cov[ok]))
+        if width is not None:
+            row[f"{name}_width"] = float(np.mean(width[ok] / y[ok]))
+    cov_all, w_all = out["E_cvplus"]
+    row["E_cvplus_all_coverage"] = float(np.mean(cov_all))  # every test trip, no OOD widening
+    row["E_cvplus_all_width"] = float(np.mean(w_all / y))
+    row["E_cvplus_flagged_coverage"] = float(np.mean(cov_all[~ok])) if (~ok).any() else None
+    row["E_flagged_share"] = float(np.mean(~ok))
+    row["E_fold_spread"] = float(np.mean(mu[:, ok].std(axis=0, ddof=1) / sb[ok]))
+    row["E_score_corr"] = float(np.mean(np.corrcoef(sc[:, ok])[np.triu_indices(len(mu), 1)]))
+    return row
 
 
 def _cell_count(train, fold: np.ndarray, i: int) -> int:
@@ -272,6 +322,33 @@ def write(res: dict, out: Path) -> None:
                      f"{_ms([x[f'rel_width_{t:g}'] for x in b])} | "
                      f"{_ms([x[f'band_coverage_{t:g}'] for x in b])} | "
                      f"{_ms([x[f'band_rel_width_{t:g}'] for x in b])} |")
+    lines += ["", f"## E. One set of scores, five ways to combine the fold models ({len(b)} "
+              "draws)", "",
+              "The same 20 out-of-fold scores and pooled threshold `q` (their 19th smallest), "
+              "in-domain test trips:", "",
+              "| interval | 90 % coverage | width / energy |", "|---|---|---|"]
+    for name, label in (("E_cvplus", "CV+ (the library): quantiles over the 20 fold-model "
+                                     "endpoints"),
+                        ("E_per_fold", "each fold model alone, `mu_k +- q s_k` (mean over k)"),
+                        ("E_fold_mean", "mean of the fold models, `mean mu_k +- q mean s_k`"),
+                        ("E_final", "final model (all 20 trips), `mu +- q s`"),
+                        ("E_cross", "Vovk's cross-conformal set (coverage only)")):
+        w = [x.get(f"{name}_width") for x in b]
+        lines.append(f"| {label} | {_ms([x[f'{name}_coverage'] for x in b])} | "
+                     f"{_ms(w) if w[0] is not None else '-'} |")
+    lines += ["", "CV+ on every test trip, without the out-of-domain widening: coverage "
+              f"{_ms([x['E_cvplus_all_coverage'] for x in b])}, width "
+              f"{_ms([x['E_cvplus_all_width'] for x in b])}; share of test trips flagged out "
+              f"of the domain {_ms([x['E_flagged_share'] for x in b])}.", "",
+              "Reference: with exchangeable scores, the coverage of one draw's pooled "
+              f"threshold is Beta({K_TH}, {N + 1 - K_TH}) distributed: mean "
+              f"{K_TH / (N + 1):.3f}, sd {_beta_sd():.3f}; the standard error of a mean "
+              f"over {len(b)} draws is {_beta_sd() / np.sqrt(len(b)):.3f} (8 draws: "
+              f"{_beta_sd() / np.sqrt(8):.3f})."]
+    lines += ["", "Spread of the fold models' means at a test trip over their mean predictive "
+              f"sd: {_ms([x['E_fold_spread'] for x in b])}; mean correlation between two "
+              f"fold models' normalised scores on the test trips: "
+              f"{_ms([x['E_score_corr'] for x in b])}."]
     with atomic_path(out / "mechanism.md") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
 
@@ -288,9 +365,15 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=16, help="training draws of parts A-C")
     ap.add_argument("--refit-draws", type=int, default=12,
                     help="draws of the standalone refits of part C (5 fits each)")
+    ap.add_argument("--from-json", action="store_true",
+                    help="rewrite mechanism.md from the saved mechanism.json (no fits)")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (results do not "
                     "depend on it: every draw has its own seeds)")
     args = ap.parse_args(argv)
+    if args.from_json:
+        write(json.loads((args.out / "mechanism.json").read_text()), args.out)
+        print(f"wrote {args.out / 'mechanism.md'} from mechanism.json")
+        return 0
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs),
                              initializer=_one_thread if args.jobs > 1 else None) as ex:

@@ -101,6 +101,7 @@ from hybridev.learning.physical import (
     floor_per_km,
 )
 from hybridev.learning.predictive import EnergyDistribution
+from hybridev.physics.kinematics import trace_keys
 from hybridev.physics.validation import TRIP_RULES, check_table
 
 __all__ = [
@@ -212,7 +213,7 @@ def _check_quantiles(quantiles) -> np.ndarray:
 def _rows(cond: pd.DataFrame, s0: np.ndarray, dist_km: np.ndarray) -> pd.DataFrame:
     """Trip table with ``dist_km.shape[1]`` rows per condition (same trace key per condition)."""
     n, k = dist_km.shape
-    keys = cond["trip_id"].to_numpy() if "trip_id" in cond.columns else np.arange(n)
+    keys = trace_keys(cond)  # trip_id, else its speed and grade (as simulate): not its row
     rows = cond.iloc[np.repeat(np.arange(n), k)].reset_index(drop=True)
     rows["trip_id"] = np.repeat(keys, k)
     rows["distance_km"] = dist_km.ravel()
@@ -456,7 +457,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     ...     warnings.simplefilter("ignore")
     ...     out = predict_range(HybridModel(n_steps=200), c, soc_initial=0.8, soc_reserve=0.1)
     >>> round(float(out.range_km_q50[0]))  # unfitted: physics only, every band equal
-    295
+    296
     >>> from hybridev import simulate      # a trip that long uses the budget, 0.7 x 75 kWh
     >>> trip = c.assign(distance_km=out.range_km_q50, soc_initial=0.8)
     >>> round(float(simulate(trip, n_steps=200).energy_kwh_physics[0]), 2)
@@ -489,7 +490,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         score, ok = model.domain_.score(at)
         out["in_domain"], out["domain_score"] = ok, score
         if (~ok).any():
-            warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=2,
+            warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=3,
                                reasons=model.domain_.reasons(at))
     return out
 

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pandas as pd
 
 from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX, PhysicsPrior
+from hybridev.core.errors import CalibrationWarning
 
-__all__ = ["prior_check"]
+__all__ = ["prior_check", "warn_unphysical"]
 
 
 def prior_check(post, level: float = 0.99) -> pd.DataFrame:
@@ -67,3 +69,46 @@ def prior_check(post, level: float = 0.99) -> pd.DataFrame:
     return pd.DataFrame(rows, index=pd.Index(post.param_names, name="parameter"),
                         columns=["prior_centre", "prior_lo", "prior_hi", "median",
                                  "shift_sd", "inside"])
+
+
+def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[str]:
+    """Warn (:class:`~hybridev.core.errors.CalibrationWarning`) when medians leave their priors.
+
+    A fitted model is still returned; the warning names each parameter whose
+    posterior median lies outside its prior's central ``level`` range
+    (:func:`prior_check`), and the likely causes: an input in the wrong unit
+    (temperatures in degF, energies in Wh, distances in miles), a wrong vehicle
+    (coast-down, mass), or something the physics does not model.
+
+    Returns
+    -------
+    list of str
+        The flagged parameter names (empty: no warning).
+
+    Examples
+    --------
+    >>> from hybridev import VehicleParams
+    >>> from hybridev.bayes.posterior import PhysicsPosterior
+    >>> post = PhysicsPosterior(["aux_base_kw"], [[4.0], [6.0]], [0.05, 0.05],
+    ...                         vehicle=VehicleParams())
+    >>> with warnings.catch_warnings(record=True) as w:
+    ...     warnings.simplefilter("always")
+    ...     warn_unphysical(post)
+    ['aux_base_kw']
+    >>> "aux_base_kw 5 (prior 99 % range" in str(w[0].message)
+    True
+    """
+    pc = prior_check(post, level)
+    bad = pc[~pc["inside"]]
+    if len(bad):
+        items = ", ".join(f"{name} {r['median']:.3g} (prior {100 * level:g} % range "
+                          f"{r['prior_lo']:.3g}-{r['prior_hi']:.3g})"
+                          for name, r in bad.iterrows())
+        warnings.warn(
+            f"physics posterior: {items}: outside what the prior calls plausible, so the "
+            "calibrated physics is compensating for something. Check the units of the "
+            "inputs (temperature_c in degC, energy_kwh in kWh, distance_km in km, "
+            "avg_speed_kmh in km/h) and the vehicle (coast-down A/B/C, mass); if they are "
+            "right, the car or its driver differs from the model there (posterior_"
+            ".prior_check() has the table)", CalibrationWarning, stacklevel=stacklevel)
+    return list(bad.index)

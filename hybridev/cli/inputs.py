@@ -164,7 +164,8 @@ def fill_soc_initial(table, soc_initial: float | None):
 def hint_missing_soc(exc: ValueError) -> ValueError:
     """Add what to do to a 'missing soc_initial' error."""
     msg = str(exc)
-    if "soc_initial" in msg and "missing" in msg:
+    head = msg.split("; required:")[0]  # the missing columns, not the required list
+    if "soc_initial" in head and "missing" in head:
         return ValueError(msg + "; a logger without SoC: give --soc-initial S (e.g. 0.9), "
                           "and map your energy column to energy_kwh with --columns")
     return exc

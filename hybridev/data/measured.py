@@ -43,8 +43,9 @@ MAX_CAPACITY_SHARE = 1.5
 
 MEASURED_RULES: dict[str, FieldRule] = {
     **TRIP_RULES,
-    "energy_kwh": FieldRule(0.0, 1000.0, lo_open=True),
-    "soc_final": FieldRule(0.0, 1.0),
+    "energy_kwh": FieldRule(0.0, 1000.0, lo_open=True,
+                            hint="kWh; values of thousands are usually a log in Wh"),
+    "soc_final": FieldRule(0.0, 1.0, hint="a fraction; a SoC in percent divides by 100"),
 }
 
 _REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")

@@ -15,9 +15,9 @@
   predictions is keyed per trip (synthetic speed traces by ``(seed,
   trip_id)``, see :func:`hybridev.physics.kinematics.keyed_normals`) or
   shared by all trips (posterior draws chosen by ``seed`` alone). Without a
-  ``trip_id`` column the pandas methods key the traces by row position in the
-  table; :func:`row_offsets` gives each partition its first global row so the
-  dask path keys them the same way (at the cost of one pass counting rows).
+  ``trip_id`` column a trace is keyed by the trip's own inputs
+  (:func:`hybridev.physics.kinematics.content_keys`), never by its row, so a
+  partition needs nothing from the others.
 """
 
 from __future__ import annotations
@@ -25,11 +25,10 @@ from __future__ import annotations
 import uuid
 import warnings
 
-import numpy as np
 import pandas as pd
 
 __all__ = ["KEY", "check_dask_frame", "output_meta", "plain_strings", "restore_strings",
-           "row_offsets", "shipped", "with_keys"]
+           "shipped"]
 
 KEY = "trip_id"
 _VALID = {"distance_km": 10.0, "avg_speed_kmh": 40.0, "temperature_c": 15.0,
@@ -52,14 +51,6 @@ def shipped(obj, label: str = "model"):
     return dask.delayed(obj, name=f"hybridev-{label}-{uuid.uuid4().hex}", pure=False)
 
 
-def row_offsets(ddf) -> np.ndarray | None:
-    """First global row of each partition when ``ddf`` has no ``trip_id``, else None."""
-    if KEY in ddf.columns:
-        return None
-    lengths = np.asarray(ddf.map_partitions(len).compute(), dtype=np.int64)
-    return np.r_[0, np.cumsum(lengths)[:-1]]
-
-
 def plain_strings(part: pd.DataFrame) -> pd.DataFrame:
     """String-extension columns (dask's default ``string[pyarrow]``) as object, NA as None.
 
@@ -80,16 +71,6 @@ def restore_strings(out: pd.DataFrame, dtypes: pd.Series) -> pd.DataFrame:
             if c in dtypes.index and isinstance(dtypes[c], pd.StringDtype)
             and out[c].dtype == object}
     return out.astype(back) if back else out
-
-
-def with_keys(part: pd.DataFrame, offsets, partition_info) -> tuple[pd.DataFrame, bool]:
-    """``part`` (strings plain) with a temporary ``trip_id`` = global row position (when
-    offsets are given)."""
-    part = plain_strings(part)
-    if offsets is None:
-        return part, False
-    first = int(offsets[partition_info["number"]]) if partition_info else 0
-    return part.assign(**{KEY: np.arange(first, first + len(part), dtype=np.int64)}), True
 
 
 def sample_row(meta: pd.DataFrame) -> pd.DataFrame:

@@ -2,7 +2,7 @@
 
 ``predict_range(model, ddf, soc_initial=0.9)`` reaches :func:`predict_range_dask`
 through :mod:`hybridev.core.plugins`. The trace key of a condition is its
-``trip_id`` (or its global row position, as in the pandas function), and the
+``trip_id`` (or its own inputs, as in the pandas function), and the
 posterior draws depend on ``seed`` only, so each row equals the pandas
 result for the same seed whatever the partitioning, up to floating-point
 summation order in the batched quantile search (relative differences about
@@ -19,13 +19,11 @@ import pandas as pd
 from hybridev.apps.range import predict_range
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.fleet.partitions import (
-    KEY,
     check_dask_frame,
     output_meta,
+    plain_strings,
     restore_strings,
-    row_offsets,
     shipped,
-    with_keys,
 )
 
 __all__ = ["predict_range_dask"]
@@ -39,13 +37,13 @@ def _scalar(name: str, value) -> float:
     return float(value)
 
 
-def _part(part: pd.DataFrame, model, kwargs: dict, offsets, partition_info=None):
+def _part(part: pd.DataFrame, model, kwargs: dict):
     dtypes = part.dtypes
-    part, temp = with_keys(part, offsets, partition_info)
+    part = plain_strings(part)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)
         out = predict_range(model, part, **kwargs)
-    return restore_strings(out.drop(columns=[KEY]) if temp else out, dtypes)
+    return restore_strings(out, dtypes)
 
 
 def predict_range_dask(model, conditions, *, soc_initial, soc_reserve=0.0,
@@ -90,5 +88,4 @@ def predict_range_dask(model, conditions, *, soc_initial, soc_reserve=0.0,
     if not hasattr(model, "net_"):
         warnings.warn(f"{type(model).__name__} is not fitted: the range bands are the physics "
                       "range only", PhysicsFallbackWarning, stacklevel=3)
-    offsets = row_offsets(conditions)
-    return conditions.map_partitions(_part, shipped(model), kwargs, offsets, meta=meta)
+    return conditions.map_partitions(_part, shipped(model), kwargs, meta=meta)

@@ -33,24 +33,22 @@ from hybridev.fleet.partitions import (
     output_meta,
     plain_strings,
     restore_strings,
-    row_offsets,
     shipped,
-    with_keys,
 )
 
 __all__ = ["predict_dask", "predict_interval_dask"]
 
 
-def _score(part: pd.DataFrame, model, method: str, kwargs: dict, offsets,
-           traces=None, partition_info=None) -> pd.DataFrame:
-    """The pandas method on one partition (with partition-free trace keys).
+def _score(part: pd.DataFrame, model, method: str, kwargs: dict,
+           traces=None) -> pd.DataFrame:
+    """The pandas method on one partition (trace keys never depend on the partition).
 
     Out-of-domain rows are marked (``in_domain``) but not warned about per partition:
     the lazy result cannot count them before it is computed (the CLI warns once, with
     the count, after writing).
     """
     dtypes = part.dtypes
-    part, temp = with_keys(part, offsets, partition_info)
+    part = plain_strings(part)
     if isinstance(traces, pd.DataFrame):  # a dask partition of the time series
         traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
                   if len(traces) else None)
@@ -58,7 +56,7 @@ def _score(part: pd.DataFrame, model, method: str, kwargs: dict, offsets,
         warnings.simplefilter("ignore", PhysicsFallbackWarning)  # warned once, up front
         warnings.simplefilter("ignore", OutOfDomainWarning)  # the in_domain column
         out = getattr(model, method)(part, timeseries=traces, **kwargs)
-    return restore_strings(out.drop(columns=[KEY]) if temp else out, dtypes)
+    return restore_strings(out, dtypes)
 
 
 def _lazy(model, ddf, method: str, kwargs: dict, timeseries):
@@ -76,11 +74,10 @@ def _lazy(model, ddf, method: str, kwargs: dict, timeseries):
         ts = ts.astype({KEY: ddf._meta[KEY].dtype})
         trips = ddf.shuffle(KEY, npartitions=n)
         ts = ts.shuffle(KEY, npartitions=n)
-        return trips.map_partitions(_score, m, method, kwargs, None, ts, meta=meta,
+        return trips.map_partitions(_score, m, method, kwargs, ts, meta=meta,
                                     align_dataframes=False)
-    offsets = row_offsets(ddf)
     tr = None if timeseries is None else shipped(as_traces(timeseries), "traces")
-    return ddf.map_partitions(_score, m, method, kwargs, offsets, tr, meta=meta)
+    return ddf.map_partitions(_score, m, method, kwargs, tr, meta=meta)
 
 
 def _warn_unfitted(model) -> None:

@@ -51,6 +51,7 @@ import torch
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
+from hybridev.bayes.checks import warn_unphysical
 from hybridev.bayes.heater import HeaterSelection, select_heater_kind
 from hybridev.bayes.priors import DEFAULT_PARAMS
 from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
@@ -567,7 +568,9 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         -----
         CalibrationWarning
             When the data cannot calibrate 90 % intervals (too few calibration
-            trips or groups).
+            trips or groups), or when a physics parameter's posterior median
+            leaves its prior's 99 % range (often an input in the wrong unit;
+            :func:`hybridev.bayes.checks.warn_unphysical`).
         """
         self._check_params()
         _check_range("seed", seed, 0, 2**63 - 1, integer=True)  # of fit
@@ -612,6 +615,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         heater = self._select_heater(good.iloc[rest], traces, codes[rest])
         if self._residual:  # the calibration trips stay out of the physics posterior too
             self._fit_posterior(good.iloc[rest], seed, traces)
+            if getattr(self, "posterior_", None) is not None:
+                warn_unphysical(self.posterior_)
         phys = self._physics(good, traces)
         names = self._feature_names()
         x = trip_features(phys, names)

@@ -121,8 +121,6 @@ class OutOfDomainMixin:
         no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
                    else np.zeros(n, dtype=bool))
         if no_mode.any():
-            if "trip_id" not in table:  # keep each trip's trace key: its row in the table
-                table = table.assign(trip_id=np.arange(len(table)))
             sub = table.loc[no_mode, [c for c in table.columns if c not in _PHYSICS_COLUMNS]]
             mus = np.stack([self._mode_prediction(sub.assign(mode=m), traces)
                             for m in MODE_NAMES])

@@ -11,10 +11,18 @@ exchangeable groups (new days), which is what a user meets.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 
-from hybridev.bayes.groups import AUTO_GROUP_COLUMNS, auto_group_labels, group_labels
+from hybridev.bayes.groups import (
+    AUTO_GROUP_COLUMNS,
+    auto_group_column,
+    auto_group_labels,
+    group_labels,
+)
+from hybridev.core.errors import DataWarning
 
 __all__ = ["AUTO_GROUP_COLUMNS", "group_codes", "group_holdout", "group_kfold"]
 
@@ -51,6 +59,13 @@ def group_codes(groups, measured: pd.DataFrame | None, n_trips: int) -> np.ndarr
         g = pd.Series(np.asarray(labels.to_numpy(), dtype=object).ravel())
         lab = g.astype(str).where(g.notna(), pd.Series([f"\0trip {i}" for i in range(len(g))]))
         codes = pd.factorize(lab)[0].astype(np.int64)
+        miss = int(g.isna().sum())
+        if miss:
+            col = auto_group_column(measured)
+            warnings.warn(f"{col}: {miss} of {n_trips} trips have no value; each of them is "
+                          "its own group, so it is not kept with the other trips of its "
+                          f"{'day' if col == 'date' else 'group'} when trips are held out; "
+                          f"fill in {col} for every trip", DataWarning, stacklevel=3)
         return codes if len(np.unique(codes)) > 1 else np.arange(n_trips)
     if isinstance(groups, str):
         if measured is None or groups not in measured.columns:

@@ -42,10 +42,12 @@ from hybridev.physics.params import DrivingProfile, get_profile
 
 __all__ = [
     "MIN_STEPS_PER_CYCLE",
+    "content_keys",
     "keyed_normals",
     "positive_kinetic_energy",
     "profile_table",
     "synthesize_speed_trace",
+    "trace_keys",
 ]
 
 MIN_STEPS_PER_CYCLE = 8
@@ -97,6 +99,55 @@ def _keys(trip_keys, n: int) -> np.ndarray:
     if k.dtype.kind in "iu":
         return k.astype(np.uint64)
     return pd.util.hash_array(k.astype(object))
+
+
+_CONTENT_COLUMNS = ("avg_speed_kmh", "grade_pct")
+"""The inputs that key the synthetic trace of a trip without a ``trip_id``."""
+
+
+def content_keys(columns) -> np.ndarray:
+    """Trace key of each trip from its own inputs, for trips without a ``trip_id``.
+
+    A hash of ``avg_speed_kmh`` and ``grade_pct`` (those present): a trip's
+    synthetic speed trace, and so its prediction, does not depend on the
+    other rows of the table or their order. Like a ``trip_id``, the key does
+    not change with the trip's distance or mode, so a range found by
+    :func:`hybridev.predict_range` for a condition is the distance at which
+    :func:`hybridev.simulate` of that trip uses the budget, and the three modes
+    of a trip whose mode is unknown share one key.
+
+    Parameters
+    ----------
+    columns : pandas.DataFrame or mapping of str to array_like (n_trips,)
+
+    Returns
+    -------
+    numpy.ndarray of uint64, shape (n_trips,)
+
+    Examples
+    --------
+    >>> k = content_keys({"avg_speed_kmh": [40.0, 55.0, 40.0], "grade_pct": [0.0, 0.0, 0.0]})
+    >>> bool(k[0] == k[2]), bool(k[0] == k[1])
+    (True, False)
+    """
+    present = [c for c in _CONTENT_COLUMNS if c in columns]
+    if not present:
+        raise ValueError(f"content_keys needs one of the columns {list(_CONTENT_COLUMNS)}")
+    key = np.zeros(len(np.asarray(columns[present[0]])), dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for j, c in enumerate(present):
+            v = np.asarray(columns[c], dtype=float)
+            v = np.where(v == 0.0, 0.0, v)  # -0.0 and 0.0: one key
+            h = pd.util.hash_array(v)
+            key = _splitmix64(key ^ (h + np.uint64(j + 1) * _GOLDEN))
+    return key
+
+
+def trace_keys(table) -> np.ndarray:
+    """Trace key per trip: its ``trip_id`` when the table has one, else :func:`content_keys`."""
+    if "trip_id" in table:
+        return np.asarray(table["trip_id"])
+    return content_keys(table)
 
 
 def keyed_normals(seed: int, keys: np.ndarray, n_cols: int) -> np.ndarray:

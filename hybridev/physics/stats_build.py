@@ -11,7 +11,7 @@ import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.forces import MOVING_MPS, _moving_steps
-from hybridev.physics.kinematics import profile_table
+from hybridev.physics.kinematics import profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
 from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
@@ -296,7 +296,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     mode = (trips["mode"].astype(object) if "mode" in trips.columns
             else pd.Series([None] * n, index=trips.index, dtype=object))
     known = (mode.notna() & (mode.astype(str).str.len() > 0)).to_numpy()
-    keys = (trips["trip_id"].to_numpy() if "trip_id" in trips.columns else np.arange(n))
+    keys = trace_keys(trips)  # as simulate: trip_id, else the trip's own inputs
     logged = np.zeros(n, dtype=bool)
     if traces is not None and "trip_id" in trips.columns:
         logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)

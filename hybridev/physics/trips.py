@@ -37,7 +37,12 @@ from hybridev.physics.forces import (
     soc_trajectory,
     trace_power_kw,
 )
-from hybridev.physics.kinematics import _check_steps, profile_table, synthesize_speed_trace
+from hybridev.physics.kinematics import (
+    _check_steps,
+    profile_table,
+    synthesize_speed_trace,
+    trace_keys,
+)
 from hybridev.physics.params import PROFILES, VehicleParams
 from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 from hybridev.physics.validation import _validated_trip_columns, validate_trips
@@ -137,7 +142,7 @@ def _column_blocks(cols: dict[str, np.ndarray], n: int, n_steps: int, seed: int
     s = cols["avg_speed_kmh"]
     modes = cols["mode"]
     grade = np.arctan(cols["grade_pct"] / 100.0) if "grade_pct" in cols else None
-    keys = cols["trip_id"] if "trip_id" in cols else np.arange(n)
+    keys = trace_keys(cols)  # trip_id, else the trip's own inputs: not its row
     step = max(1, min(BLOCK_TRIPS, _BLOCK_SAMPLES // (int(n_steps) + 1)))
     for start in range(0, n, step):
         sl = slice(start, start + step)
@@ -165,8 +170,10 @@ def simulate(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *, n_ste
         Intervals per trip (the paper's ``N``).
     seed : int
         Seed of the speed-trace randomness; same seed, same output. A trip's
-        trace depends on ``(seed, trip_id)`` (row position when there is no
-        ``trip_id`` column), not on the other rows.
+        trace depends on ``(seed, trip_id)`` (without a ``trip_id`` column, on
+        the trip's mean speed and grade:
+        :func:`hybridev.physics.kinematics.content_keys`), not on the other
+        rows or their order.
     progress : callable, optional
         Called with the number of trips finished after each block.
 

@@ -39,6 +39,8 @@ class FieldRule:
     hi: float
     lo_open: bool = False
     hi_open: bool = False
+    hint: str = ""
+    """Likely cause of a bad value, appended to the message (e.g. a unit mix-up)."""
 
     def describe(self) -> str:
         return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
@@ -52,8 +54,8 @@ class FieldRule:
 TRIP_RULES: dict[str, FieldRule] = {
     "distance_km": FieldRule(0.0, 2000.0, lo_open=True),
     "avg_speed_kmh": FieldRule(0.0, 250.0, lo_open=True),
-    "temperature_c": FieldRule(-50.0, 60.0),
-    "soc_initial": FieldRule(0.0, 1.0),
+    "temperature_c": FieldRule(-50.0, 60.0, hint="degC; not kelvin or degF"),
+    "soc_initial": FieldRule(0.0, 1.0, hint="a fraction; a SoC in percent divides by 100"),
     "hour": FieldRule(0.0, 24.0, hi_open=True),
     "grade_pct": FieldRule(-30.0, 30.0),
 }
@@ -128,7 +130,7 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
     missing = [c for c in required if c not in table.columns]
     if missing:
         raise ValueError(f"{what} is missing required column(s) {missing}; "
-                         f"required: {list(required)}")
+                         f"required: {list(required)}{_close_names(missing, table.columns)}")
     if len(table) == 0:
         raise ValueError(f"{what} is empty: at least one row is required")
     modes = tuple(PROFILES) if modes is None else modes
@@ -166,7 +168,7 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
         raw = out[field]
         x = _numeric(raw, field, what)
         report(field, rule.bad_mask(x), lambda raw=raw: raw.to_numpy(dtype=object),
-               rule.describe())
+               rule.describe() + (f" ({rule.hint})" if rule.hint else ""))
         if raw.dtype != np.float64:  # float64 columns are kept as they are
             conv[field] = x
         arrays[field] = x
@@ -193,6 +195,18 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
         raise ValueError(f"{what}: all {len(out)} rows were rejected; first reason: "
                          f"{rejected['reason'].iloc[0]}")
     return good, rejected, arrays
+
+
+def _close_names(missing, columns) -> str:
+    """``"; column 'x' looks like a misspelt 'y'"`` for columns close to a missing one."""
+    import difflib
+
+    have = [str(c) for c in columns]
+    pairs = [(m, hit[0]) for m in missing
+             if (hit := difflib.get_close_matches(m, have, n=1, cutoff=0.75))]
+    if not pairs:
+        return ""
+    return "; " + ", ".join(f"column {h!r} looks like a misspelt {m!r}" for m, h in pairs)
 
 
 def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
@@ -233,7 +247,7 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     >>> validate_trips(t.assign(temperature_c=295.0))
     Traceback (most recent call last):
     ...
-    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]; also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0, allowed [-50, 60]
+    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]; also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0, allowed [-50, 60] (degC; not kelvin or degF)
     """
     good, _ = check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
     return good

@@ -8,6 +8,8 @@ the difference of two binomial proportions).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -21,6 +23,7 @@ from hybridev.apps.charging.plan import (
 )
 from hybridev.apps.charging.schedule import parse_problem
 from hybridev.cli.main import main
+from hybridev.core.errors import OutOfDomainWarning
 from hybridev.learning.predictive import EnergyDistribution
 
 S, N = 4000, 20000
@@ -327,7 +330,18 @@ def test_cli_plan_with_saved_model(tmp_path, capsys):
     plan_df = pd.read_csv(out)
     assert len(plan_df) == 192
     assert (plan_df.loc[~plan_df["parked"], "charge_kw"] == 0).all()
-    assert len(pd.read_csv(trips_out)) == 6
+    trips_df = pd.read_csv(trips_out)
+    assert len(trips_df) == 6
+    # each trip's inputs and domain columns, as predict_interval gives them
+    sched_df = schedule(TWO_DAYS, 5.0 * ENERGY).sort_values("departure", kind="stable")
+    assert {"distance_km", "temperature_c", "in_domain", "domain_score"} <= set(trips_df)
+    np.testing.assert_allclose(trips_df["distance_km"], sched_df["distance_km"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        ref = model.predict_interval(sched_df.drop(columns="departure").assign(soc_initial=0.3),
+                                     seed=0)
+    assert trips_df["in_domain"].tolist() == ref["in_domain"].tolist()
+    np.testing.assert_allclose(trips_df["domain_score"], ref["domain_score"])
 
 
 def test_cli_level_lets_a_small_model_plan(tmp_path, capsys):

@@ -17,6 +17,7 @@ from hybridev.apps.range import (
 )
 from hybridev.apps.range_plot import FAN_QUANTILES, plot_soc_fan, soc_fan
 from hybridev.cli.main import main
+from hybridev.core.errors import OutOfDomainWarning
 from hybridev.physics.truth import make_dataset
 
 N_STEPS = 200  # coarser traces than the default 1000 keep the fit fast; truth uses the same
@@ -127,6 +128,18 @@ def test_rows_are_independent_and_seeded(model, conditions):
     np.testing.assert_allclose(part[BANDS].to_numpy(), full[BANDS].to_numpy()[5:9], rtol=1e-6)
     again = predict_range(model, c, soc_initial=s0, seed=3)
     pd.testing.assert_frame_equal(full, again)
+    # without trip_id too: the trace key is the condition's own inputs, not its row
+    c = c.drop(columns="trip_id")
+    full = predict_range(model, c, soc_initial=s0, seed=3)
+    part = predict_range(model, c.iloc[5:9], soc_initial=s0[5:9], seed=3)
+    np.testing.assert_allclose(part[BANDS].to_numpy(), full[BANDS].to_numpy()[5:9], rtol=1e-6)
+
+
+def test_out_of_domain_warning_points_at_the_caller(model):
+    cold = grid(temperature_c=[-40.0])
+    with pytest.warns(OutOfDomainWarning) as rec:
+        predict_range(model, cold, soc_initial=0.9)
+    assert any(w.filename == __file__ for w in rec)
 
 
 def test_unknown_mode_and_missing_hour(model):

@@ -132,6 +132,8 @@ def test_summary_matches_recomputation_from_predictions(run):
         s["metrics"]["hybrid"]["coverage"][f"{lv:g}"], abs=1e-12)
     rel = stats.spearmanr(p["confidence_rel"], np.abs(p["energy_kwh_pred"] - y) / y).statistic
     assert s["metrics"]["hybrid"]["spearman_confidence_rel"] == pytest.approx(rel, abs=1e-12)
+    assert s["metrics"]["hybrid"]["spearman_n"] == len(p)
+    assert s["metrics"]["hybrid"]["spearman_null_sd"] == pytest.approx(1 / np.sqrt(len(p) - 1))
     n_flag = int(np.ceil(0.1 * len(p)))
     top = p.nlargest(n_flag, "confidence")["trip_id"]
     assert [f["trip_id"] for f in s["flagged"]] == top.tolist()

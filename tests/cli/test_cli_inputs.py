@@ -202,3 +202,15 @@ def test_new_user_logger_variants(logger, tmp_path, capsys):
                  "--soc-initial", "0.8", "--out", str(tmp_path / "p2.csv")]) == 2
     assert "same ids" in capsys.readouterr().err
     assert not (tmp_path / "p2.csv").exists()
+
+
+def test_the_soc_hint_only_when_soc_initial_is_the_missing_column():
+    from hybridev.cli.inputs import hint_missing_soc
+
+    typo = ValueError("measured trips is missing required column(s) ['temperature_c']; "
+                      "required: ['distance_km', 'avg_speed_kmh', 'temperature_c', "
+                      "'soc_initial']")
+    assert "--soc-initial" not in str(hint_missing_soc(typo))
+    no_soc = ValueError("measured trips is missing required column(s) ['soc_initial']; "
+                        "required: ['distance_km', 'soc_initial']")
+    assert "give --soc-initial S" in str(hint_missing_soc(no_soc))

@@ -121,3 +121,16 @@ def test_energy_above_the_capacity_is_a_bad_row_hinting_wh():
     with pytest.raises(ValueError, match=r"2 row\(s\) have energy_kwh above.*energy_kwh=95"):
         validate_measured_trips(t, veh)
     assert len(validate_measured_trips(t)[0]) == 4  # no vehicle given: no capacity to judge by
+
+
+def test_energy_of_thousands_names_the_likely_unit_mix_up():
+    """Energies in Wh (thousands) fail the (0, 1000] range first: the message says Wh."""
+    from hybridev import make_trips
+
+    t = make_trips(3, seed=0).assign(energy_kwh=[2684.7, 5100.0, 8.0])
+    with pytest.raises(ValueError, match=r"energy_kwh=2684.7, allowed \(0, 1000\] \(kWh; "
+                                         r"values of thousands are usually a log in Wh\)"):
+        validate_measured_trips(t)
+    _, rej = validate_measured_trips(t, on_error="collect")
+    assert rej["row"].tolist() == [0, 1]
+    assert all("a log in Wh" in r for r in rej["reason"])

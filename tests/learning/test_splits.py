@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hybridev.core.errors import DataWarning
 from hybridev.learning.splits import group_codes, group_holdout, group_kfold
 
 
@@ -48,7 +49,9 @@ def test_auto_groups_use_date_then_session_and_fall_back_to_trips():
     from hybridev.learning.splits import group_codes
 
     t = pd.DataFrame({"date": ["d1", "d1", None, "d2"], "session_group": [1, 2, 3, 4]})
-    assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]  # a missing date: own group
+    with pytest.warns(DataWarning, match="date: 1 of 4 trips have no value; each of them is "
+                                         "its own group"):
+        assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]  # a missing date: own group
     assert group_codes("auto", t.drop(columns="date"), 4).tolist() == [0, 1, 2, 3]
     assert group_codes("auto", pd.DataFrame({"date": ["d"] * 3}), 3).tolist() == [0, 1, 2]
     assert group_codes("auto", pd.DataFrame({"x": [1, 2]}), 2).tolist() == [0, 1]
@@ -57,8 +60,9 @@ def test_auto_groups_use_date_then_session_and_fall_back_to_trips():
 def test_auto_groups_take_a_date_at_day_resolution():
     t = pd.DataFrame({"date": ["2024-01-05 08:13:00", "2024-01-05 17:40:00",
                                "2024-01-06 07:02:00", None]})
-    assert group_codes("auto", t, 4).tolist()[:3] == [0, 0, 1]
-    assert group_codes("auto", t, 4)[3] not in (0, 1)  # missing date: a group of its own
+    with pytest.warns(DataWarning, match="no value"):
+        assert group_codes("auto", t, 4).tolist()[:3] == [0, 0, 1]
+        assert group_codes("auto", t, 4)[3] not in (0, 1)  # missing date: a group of its own
     assert group_codes("date", t.iloc[:3], 3).tolist() == [0, 0, 1]  # named column alike
     ts = pd.DataFrame({"date": pd.to_datetime(["2024-01-05 08:00", "2024-01-05 09:00"])})
     assert group_codes("auto", ts, 2).tolist() == [0, 1]  # one day only: a trip each
@@ -66,6 +70,10 @@ def test_auto_groups_take_a_date_at_day_resolution():
 
 
 def test_auto_groups_skip_a_single_date_for_sessions():
+    import warnings
+
     t = pd.DataFrame({"date": ["2024-01-05"] * 4, "session_group": [1, 1, 2, 3]})
-    assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)  # every label present: no warning
+        assert group_codes("auto", t, 4).tolist() == [0, 0, 1, 2]
     assert group_codes("auto", t.drop(columns="session_group"), 4).tolist() == [0, 1, 2, 3]

@@ -197,3 +197,26 @@ def test_simulate_empty_table_and_bad_arguments():
         simulate(make_trips(3), n_steps=2)
     with pytest.raises(ValueError, match="seed"):
         simulate(make_trips(3), seed=1.5)
+
+
+def test_a_trip_without_trip_id_does_not_depend_on_the_other_rows():
+    """Without trip_id the trace is keyed by the trip's own inputs, not its row: reordering
+    or subsetting the table leaves each trip's physics unchanged (and trip_stats agrees)."""
+    from hybridev.physics.stats import energy_from_stats
+    from hybridev.physics.stats_build import trip_stats
+
+    t = make_trips(12, seed=3).drop(columns="trip_id")
+    e = simulate(t, n_steps=100, seed=1)["energy_kwh_physics"].to_numpy()
+    rev = simulate(t.iloc[::-1], n_steps=100, seed=1)["energy_kwh_physics"].to_numpy()[::-1]
+    np.testing.assert_array_equal(e, rev)
+    np.testing.assert_array_equal(e[[4]], simulate(t.iloc[[4]], n_steps=100, seed=1)
+                                  ["energy_kwh_physics"].to_numpy())
+    np.testing.assert_allclose(energy_from_stats(trip_stats(t.iloc[::-1], n_steps=100, seed=1)),
+                               rev[::-1], rtol=1e-12)
+    # the key is the mean speed and grade: like a trip_id, not the distance or the mode
+    from hybridev.physics.kinematics import content_keys, trace_keys
+
+    k = content_keys(t)
+    assert (k == content_keys(t.assign(distance_km=1.0, mode="eco"))).all()
+    assert len(np.unique(k)) == t["avg_speed_kmh"].nunique()
+    np.testing.assert_array_equal(trace_keys(make_trips(3, seed=0)), [0, 1, 2])

@@ -89,7 +89,8 @@ def test_every_invalid_field_is_named_in_one_error():
     assert msg.startswith("trips: 1 row(s) have an invalid 'distance_km'; first at row 2")
     assert "also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0" in msg
     assert "also 2 row(s) have an invalid 'soc_initial'; first at row 1: soc_initial=80.0, " \
-           "allowed [0, 1]" in msg
+           "allowed [0, 1] (a fraction; a SoC in percent divides by 100)" in msg
+    assert "allowed [-50, 60] (degC; not kelvin or degF)" in msg  # the likely unit mix-up
 
 
 def test_speed_boundary_250_is_allowed():
@@ -162,3 +163,15 @@ def test_field_rule():
     np.testing.assert_array_equal(r.bad_mask(np.array([0.0, 0.5, 1.0, np.nan, np.inf])),
                                   [True, False, False, True, True])
     assert FieldRule(0.0, 24.0, hi_open=True).describe() == "[0, 24)"
+
+
+def test_a_misspelt_column_is_named():
+    t = pd.DataFrame({"distance_km": [1.0], "avg_speed_kmh": [30.0], "temprature_c": [5.0],
+                      "soc_initial": [0.5], "mode": ["eco"]})
+    with pytest.raises(ValueError, match=r"missing required column\(s\) \['temperature_c'\].*"
+                                         r"column 'temprature_c' looks like a misspelt "
+                                         r"'temperature_c'"):
+        validate_trips(t)
+    with pytest.raises(ValueError) as exc:  # nothing alike: no guess
+        validate_trips(t.rename(columns={"temprature_c": "x"}))
+    assert "misspelt" not in str(exc.value)

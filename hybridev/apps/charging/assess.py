@@ -13,6 +13,7 @@ at arrivals, the lowest points).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +22,7 @@ import pandas as pd
 from hybridev.apps.charging.lp import VIOLATION_TOL_KWH, soc_events, violations
 from hybridev.apps.charging.schedule import ChargingProblem
 
-__all__ = ["ChargingPlan", "assess_plan"]
+__all__ = ["ChargingPlan", "assess_plan", "with_trip_inputs"]
 
 @dataclass(frozen=True)
 class ChargingPlan:
@@ -40,6 +41,8 @@ class ChargingPlan:
         ``energy_kwh_pred`` (mean), ``energy_kwh_lo``/``_hi``, ``soc_departure_*``,
         ``soc_arrival_*`` (``_pred`` median, ``_lo``/``_hi`` band) and
         ``p_below_soc_min`` (probability that this arrival is below ``soc_min``).
+        From :func:`hybridev.plan_charging` also the trip's inputs and, for a
+        fitted :class:`hybridev.HybridModel`, ``in_domain`` and ``domain_score``.
     cost : float
         Cost of the planned grid energy (currency of the tariff).
     expected_cost : float
@@ -180,3 +183,21 @@ def assess_plan(problem: ChargingProblem, x, y, ev: np.ndarray, dist_mean: np.nd
                         risk_achieved_se=float(np.sqrt(p * (1 - p) / n_eval)),
                         risk_calibration=risk_cal, method=method, status=status, gamma=gamma,
                         n_samples=n_samples, n_eval=n_eval)
+
+
+_TRIP_INPUTS = ("distance_km", "avg_speed_kmh", "temperature_c", "mode", "grade_pct")
+
+
+def with_trip_inputs(plan: ChargingPlan, model, table: pd.DataFrame) -> ChargingPlan:
+    """The plan with each trip's inputs and, for a model with a training domain,
+    ``in_domain`` and ``domain_score`` (:mod:`hybridev.learning.domain`) in ``trips``."""
+    trips = plan.trips.copy()
+    for col in _TRIP_INPUTS:
+        if col in table.columns and col not in trips.columns:
+            trips[col] = table[col].to_numpy()
+    dom = getattr(model, "domain_", None)
+    if dom is not None and hasattr(dom, "score"):
+        score, ok = dom.score(table)
+        trips["in_domain"] = ok
+        trips["domain_score"] = score
+    return dataclasses.replace(plan, trips=trips)

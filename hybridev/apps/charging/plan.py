@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from hybridev.apps.charging.assess import ChargingPlan, assess_plan
+from hybridev.apps.charging.assess import ChargingPlan, assess_plan, with_trip_inputs
 from hybridev.apps.charging.lp import (
     VIOLATION_TOL_KWH,
     block_capacity_kwh,
@@ -262,7 +262,9 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     Calls ``model.predict_distribution(trips)`` (trips in departure order, see
     :func:`hybridev.apps.charging.schedule.model_trip_table`) and
     ``model.capacity_kwh``; everything else is
-    :func:`plan_charging_from_distribution` (same arguments and defaults).
+    :func:`plan_charging_from_distribution` (same arguments and defaults). The
+    plan's ``trips`` also carry the trips' inputs and, from a fitted
+    :class:`hybridev.HybridModel`, ``in_domain`` and ``domain_score``.
 
     A trip's energy depends on its departure SoC (internal-resistance loss
     grows as the pack voltage falls), which depends on the plan. When the
@@ -314,9 +316,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
               risk_neutral=risk_neutral, compare=compare, seed=seed,
               time_limit_s=time_limit_s, margin_se=margin_se)
     out = _plan(problem, _predict(model, table, level), np.arange(problem.n_trips), **kw)
-    if "soc_initial" in problem.trips.columns:
-        return out
-    for _ in range(n_refine):
+    for _ in range(0 if "soc_initial" in problem.trips.columns else n_refine):
         planned = out.trips["soc_departure_pred"].to_numpy(float)
         if np.max(np.abs(planned - table["soc_initial"].to_numpy(float))) <= SOC_REFINE_TOL:
             break  # the plan is consistent with the SoC its energies were predicted at
@@ -325,7 +325,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
             warnings.simplefilter("ignore", OutOfDomainWarning)
             dist = _predict(model, table, level)
         out = _plan(problem, dist, np.arange(problem.n_trips), **kw)
-    return out
+    return with_trip_inputs(out, model, table)
 
 
 def evaluate_charging(charge_kw, dist, capacity_kwh: float,

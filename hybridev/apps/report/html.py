@@ -141,10 +141,14 @@ Nominal physics has no interval.</p>
 {_table(pd.DataFrame(s["metrics"]["hybrid"].get("by_bin", [])))}
 <p class="note">Coverage and mean width (over the measured energy) of the hybrid's main-level
 intervals per temperature band and trip length (long: at least the median held-out distance).
-Spearman with the absolute relative error: <code>confidence_rel</code>
+Spearman with the absolute <em>relative</em> error (the table above ranks the error in kWh,
+which the trip's size dominates): <code>confidence_rel</code>
 {_fmt(s["metrics"]["hybrid"].get("spearman_confidence_rel"), ".2f")}, distance
 {_fmt(s["metrics"]["hybrid"].get("spearman_distance"), ".2f")}, predicted energy
-{_fmt(s["metrics"]["hybrid"].get("spearman_energy_pred"), ".2f")} (size-only baselines).</p>
+{_fmt(s["metrics"]["hybrid"].get("spearman_energy_pred"), ".2f")} (size-only baselines), on
+{s["metrics"]["hybrid"].get("spearman_n", "-")} held-out trips: with no association a rank
+correlation scatters by about {_fmt(s["metrics"]["hybrid"].get("spearman_null_sd"), ".2f")}
+(1/sqrt(n - 1)), so smaller differences are noise.</p>
 {img["predicted"]}{img["reliability"]}
 <h2>Residuals</h2>{img["residuals"]}
 <h2>Calibrated physics parameters (training trips)</h2>

@@ -167,7 +167,10 @@ def _by_condition(pred: pd.DataFrame) -> dict:
         return None if not np.isfinite(r) else float(r)
 
     out = {"by_bin": rows, "spearman_confidence_rel": rho("confidence_rel"),
-           "spearman_distance": rho("distance_km"), "spearman_energy_pred": rho("energy_kwh_pred")}
+           "spearman_distance": rho("distance_km"), "spearman_energy_pred": rho("energy_kwh_pred"),
+           "spearman_n": len(y),
+           # sd of a rank correlation of n independent pairs under no association
+           "spearman_null_sd": float(1.0 / np.sqrt(len(y) - 1)) if len(y) > 1 else None}
     if "in_domain" in pred:
         out["share_in_domain"] = float(pred["in_domain"].astype(bool).mean())
     return out
@@ -208,7 +211,9 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         absolute error; AUROC for the worst 10 %); for the hybrid also
         ``by_bin`` (coverage and mean relative width per temperature band x
         trip length), ``spearman_confidence_rel`` beside ``spearman_distance``
-        and ``spearman_energy_pred`` (against the absolute relative error)
+        and ``spearman_energy_pred`` (against the absolute relative error),
+        ``spearman_n`` (held-out trips) and ``spearman_null_sd``
+        (``1 / sqrt(n - 1)``, their scatter under no association)
         and ``share_in_domain``. Also ``data``, ``split``,
         ``parameters`` (posterior of (b) vs nominal, 90 % intervals),
         ``diagnostics``, ``hybrid`` (fit information), ``flagged`` trips,

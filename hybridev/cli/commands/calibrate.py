@@ -78,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
     trips, traces, rejected = read_trips(args.measured, args, measured=True, vehicle=vehicle)
     measured = MeasuredTrips(trips, traces, rejected)
     if measured.n_rejected:
-        print("(the rejected rows are listed in the report)", file=sys.stderr)
         report_rejected(NAME, args.measured, rejected, limit=5)
+        print("(every rejected row is listed in the report)", file=sys.stderr)
     summary = calibration_report(
         measured, out_dir=args.out, vehicle=vehicle, seed=args.seed, level=args.level,
         n_members=args.members, test_fraction=args.test_fraction,

@@ -109,7 +109,9 @@ def run(args: argparse.Namespace) -> int:
            f"{cal}), {info['n_epochs']} epochs")
     if "val_mae_kwh_model" in info:
         msg += (f"; validation MAE {info['val_mae_kwh_model']:.3f} kWh "
-                f"(physics only {info['val_mae_kwh_physics']:.3f} kWh)")
+                f"(physics only {info['val_mae_kwh_physics']:.3f} kWh; on the "
+                f"{info['n_val']} early-stopping trips, which the physics calibration also "
+                "used: not a held-out score; 'hybridev calibrate' scores held-out days)")
     print(msg)
     if "heater" in info:  # heater_kind="auto" (a --coastdown vehicle without --heater)
         h = info["heater"]
