@@ -153,7 +153,7 @@ Wall time of `fit` on the 1,275 trips, physics included. The physics posterior a
 
 Sanity check that the timed model is a real fit: on the 225 test trips its 90 % intervals
 cover {cov[0.9]:.3f} and its 50 % intervals {cov[0.5]:.3f} (the coverage study lives in
-`tests/test_uncertainty.py` and `evaluation/`).
+`tests/learning/test_uncertainty.py` and `evaluation/`).
 
 ## Prediction (one core, one thread), physics with `n_steps=1000`, 200 posterior draws
 

@@ -208,7 +208,7 @@ the MAPE-optimal multiplier), whose expected MAPE is `E|X - c| / X` with `X = 1 
 0.8 % hybrid and even its 2.1 % physics-only MAPE are therefore impossible on its own data:
 physics-only *is* the oracle up to the factor `c`, and its MAPE is the floor. We report the
 honest numbers for this truth (`truth="paper"`) and add a second, learnable truth
-(`truth="structured"`, documented in `hybridev/truth.py`): `E* = E_p (1 + S(x)) (1 + eta)` with
+(`truth="structured"`, documented in `hybridev/physics/truth.py`): `E* = E_p (1 + S(x)) (1 + eta)` with
 `S` a sum of smooth physical effects of the inputs (internal resistance, stop-and-go in rush
 hours, cold-weather heating, wind-averaged and cold-air drag) and `eta ~ N(0, 0.035^2)`,
 floor {floor[s]:.2f} %. Beside every MAPE we give the **oracle** on the same test trips
@@ -328,7 +328,7 @@ the floor. {T.lc_note(lc, cfg)}
 ## 7. Consumption statistics and consumption vs distance
 
 Physics kWh/km of the dataset is reproduced and discussed in
-[physics_reproduction.md, Section 2](physics_reproduction.md#2-consumption-statistics-table-consumption-rate-statistics);
+[physics_reproduction.md, Section 2](../physics_reproduction/physics_reproduction.md#2-consumption-statistics-table-consumption-rate-statistics);
 here it is recomputed beside the *measured* kWh/km of the two truths (1,500 trips, seed 0):
 
 {table("consumption_stats")}
@@ -340,7 +340,7 @@ kWh/km eco/normal/aggressive {", ".join(f"{meas[s][m]:.3f}" for m in ("eco", "no
 
 The paper's text for this figure (eco ~0.283, normal ~0.478, aggressive ~1.0 falling to
 ~0.42 kWh/km) contradicts its own table (0.142/0.185/0.247); see
-[physics_reproduction.md, Section 4](physics_reproduction.md#4-consumption-vs-distance-fig-consumption_distribution).
+[physics_reproduction.md, Section 4](../physics_reproduction/physics_reproduction.md#4-consumption-vs-distance-fig-consumption_distribution).
 Neither truth has such a decline: the second table above gives the short- and long-trip
 means (in both truths the effects scale with duration or energy, so kWh/km barely depends
 on length).
@@ -348,7 +348,7 @@ on length).
 ## 8. Baseline scenario
 
 The physics part (final SoC, energy, kWh/km, range left per mode) is
-[physics_reproduction.md, Section 1](physics_reproduction.md#1-baseline-scenario-table-driving-modes-comparison).
+[physics_reproduction.md, Section 1](../physics_reproduction/physics_reproduction.md#1-baseline-scenario-table-driving-modes-comparison).
 The hybrids' predictions for the same trips (hour 12, which the paper does not give), mean ±
 sd over the {n_seeds} seeds' models, next to the truth without noise:
 
@@ -399,7 +399,7 @@ The paper's 124 ms for the physics of one trip (and 125.2 ms with the network) i
   [bench_hybrid.md](../../benchmarks/results/bench_hybrid.md)).
 * **Physics-only MAPE 2.1 %** on the synthetic test set is the same number as the MAPE
   claimed against the literature table (whose four errors average 1.88 %, see
-  [physics_reproduction.md, Section 3](physics_reproduction.md#3-literature-validation-table-physics-model-validation-against-literature-benchmarks)),
+  [physics_reproduction.md, Section 3](../physics_reproduction/physics_reproduction.md#3-literature-validation-table-physics-model-validation-against-literature-benchmarks)),
   but against the paper's own `E*` the physics cannot score better than the floor,
   {floor.get(p, 0):.2f} % (ours: {_pm(hp["physics"]) if hp else "–"} %).
 * **MAE and RMSE** are consistent with the MAPE (0.37 kWh at 2.1 % implies trips of about

@@ -360,7 +360,7 @@ def main() -> int:
         "`model.predict_distribution` (physics simulated directly at ``r``, not "
         "interpolated between anchors) and its energy quantile ``1 - q`` compared with "
         "the budget. The differences are the anchor interpolation of the physics "
-        "(`hybridev/range.py`), largest where the synthesised trace changes character "
+        "(`hybridev/apps/range.py`), largest where the synthesised trace changes character "
         "with distance.",
         "",
         "| range column | energy quantile | conformal level | median abs. rel. diff | "

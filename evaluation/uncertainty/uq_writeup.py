@@ -275,7 +275,7 @@ def discussion(v: _V, res: dict) -> list[str]:
         f"{sc['DESnookerMove']:.2f} of the true one with DESnookerMove alone, "
         f"{sc['old mix']:.2f} with the old 80/20 mix, {sc['DEMove']:.2f} with DEMove, "
         f"{sc['StretchMove']:.2f} with StretchMove and {sc['library']:.2f} with the library's "
-        "moves (DEMove alone since the fix; `tests/test_calibrate.py` checks it). With the "
+        "moves (DEMove alone since the fix; `tests/bayes/test_calibrate.py` checks it). With the "
         f"old mix the same study covers {cov['recovery_old']:.1f} ± {se['recovery_old']:.1f} % "
         f"(sd of the standardised error {zsd['recovery_old']:.2f}), its intervals "
         f"{width_ratio:.2f} times as wide as the library's (median over seeds and "
@@ -432,7 +432,7 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         f"* Shift ({cfg['shift_seeds']} seeds): `HybridModel()` fitted on the fit trips at "
         "20/32 degC (resp. 40-100 km/h) only, tested on fresh trips in range and at -5 degC "
         f"(resp. 120 km/h). Recovery: {res['recovery_info']['n_seeds']} seeds x 300 "
-        "simulated trips with parameters drawn from the prior (`evaluation/uq_recovery.py`).",
+        "simulated trips with parameters drawn from the prior (`evaluation/uncertainty/uq_recovery.py`).",
         f"* Warnings while fitting: {warn_txt}; ConvergenceWarnings in the recovery study: "
         f"{res['recovery_info']['warnings']}.",
         "",

@@ -11,7 +11,11 @@ import pandas as pd
 from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX, PhysicsPrior
 from hybridev.core.errors import CalibrationWarning
 
-__all__ = ["prior_check", "warn_unphysical"]
+__all__ = ["BOUND_TOL", "prior_check", "warn_unphysical"]
+
+BOUND_TOL = 0.01
+"""Relative distance to a hard bound within which a posterior tail counts as pressed
+against it (:func:`prior_check`'s ``at_bound``)."""
 
 
 def prior_check(post, level: float = 0.99) -> pd.DataFrame:
@@ -35,7 +39,13 @@ def prior_check(post, level: float = 0.99) -> pd.DataFrame:
     pandas.DataFrame
         Index: sampled parameters; columns ``prior_centre``, ``prior_lo``,
         ``prior_hi``, ``median``, ``shift_sd`` (median minus prior centre, in
-        prior sds, on the log scale for lognormal priors) and ``inside`` (bool).
+        prior sds, on the log scale for lognormal priors), ``inside`` (bool),
+        and ``bound`` / ``at_bound``: a hard bound of the prior's support (the
+        regeneration limit, the efficiency bounds) that the posterior presses
+        against (its 95th percentile within :data:`BOUND_TOL` of an upper
+        bound, or its 5th of a lower one > 0), NaN / False otherwise. A
+        parameter at its bound is compensating for something too, even with
+        its median inside the 99 % range.
 
     Examples
     --------
@@ -57,18 +67,24 @@ def prior_check(post, level: float = 0.99) -> pd.DataFrame:
     cd = post.vehicle.road_load_source == "coastdown"
     z = float(norm.ppf(0.5 + level / 2))
     med = np.median(post.samples, axis=0)
+    q05, q95 = np.quantile(post.samples, [0.05, 0.95], axis=0)
     rows = []
-    for name, m in zip(post.param_names, med, strict=True):
+    for j, (name, m) in enumerate(zip(post.param_names, med, strict=True)):
         kind, c, sd, lo, hi = pr.spec(name, nom[name], REGEN_EFFICIENCY_MAX, coastdown=cd)
         if kind == "lognormal":
             a, b, centre = np.exp(c - z * sd), np.exp(c + z * sd), np.exp(c)
             shift = (np.log(m) - c) / sd if m > 0 else -np.inf
         else:
             a, b, centre, shift = max(lo, c - z * sd), min(hi, c + z * sd), c, (m - c) / sd
-        rows.append((centre, a, b, m, shift, bool(a <= m <= b)))
+        bound = np.nan  # a hard bound of the support the posterior presses against
+        if np.isfinite(hi) and q95[j] >= hi - BOUND_TOL * abs(hi):
+            bound = hi
+        elif lo > 0 and q05[j] <= lo + BOUND_TOL * abs(lo):
+            bound = lo
+        rows.append((centre, a, b, m, shift, bool(a <= m <= b), bound, bool(np.isfinite(bound))))
     return pd.DataFrame(rows, index=pd.Index(post.param_names, name="parameter"),
                         columns=["prior_centre", "prior_lo", "prior_hi", "median",
-                                 "shift_sd", "inside"])
+                                 "shift_sd", "inside", "bound", "at_bound"])
 
 
 def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[str]:
@@ -87,15 +103,18 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
 
     Examples
     --------
+    A car heated 20 times less than modelled, and a plausible auxiliary load:
+
     >>> from hybridev import VehicleParams
     >>> from hybridev.bayes.posterior import PhysicsPosterior
-    >>> post = PhysicsPosterior(["aux_base_kw"], [[4.0], [6.0]], [0.05, 0.05],
-    ...                         vehicle=VehicleParams())
+    >>> v = VehicleParams(climate_model="continuous")
+    >>> draws = [[0.04, 0.5], [0.06, 0.6]]  # heating_scale, aux_base_kw
+    >>> post = PhysicsPosterior(["heating_scale", "aux_base_kw"], draws, [0.05, 0.05], vehicle=v)
     >>> with warnings.catch_warnings(record=True) as w:
     ...     warnings.simplefilter("always")
     ...     warn_unphysical(post)
-    ['aux_base_kw']
-    >>> "aux_base_kw 5 (prior 99 % range" in str(w[0].message)
+    ['heating_scale']
+    >>> "heating_scale 0.05 (prior 99 % range 0.127-7.85)" in str(w[0].message)
     True
     """
     pc = prior_check(post, level)

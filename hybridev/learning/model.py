@@ -581,7 +581,14 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             measured_trips = measured_trips.trips
         else:
             traces = as_traces(timeseries)
-        good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
+        try:
+            good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
+        except ValueError as err:
+            if traces is None or "missing required column" not in str(err):
+                raise
+            raise ValueError(f"{err}; from logged traces, hybridev.read_measured_trips (files) or "
+                             "hybridev.data.logs.measured_from_frames (tables) derive "
+                             "distance_km, avg_speed_kmh and temperature_c") from None
         n = len(good)
         codes = group_codes(groups, measured_trips, n)
         if groups is not None and not (isinstance(groups, str) and groups == "auto") \

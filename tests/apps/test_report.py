@@ -87,6 +87,9 @@ def test_html_is_self_contained(run):
     for src in srcs:
         assert src.startswith("data:image/png;base64,")
         assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    h = run["summary"]["metrics"]["hybrid"]  # one sentence on what the networks add
+    better = h["mape_pct"] < h["mape_physics_part_pct"] - 0.05
+    assert ("take the held-out MAPE from" if better else "do not improve on their physics") in text
 
 
 def test_every_rejected_row_is_listed_with_reason(run):
@@ -133,6 +136,8 @@ def test_summary_matches_recomputation_from_predictions(run):
     rel = stats.spearmanr(p["confidence_rel"], np.abs(p["energy_kwh_pred"] - y) / y).statistic
     assert s["metrics"]["hybrid"]["spearman_confidence_rel"] == pytest.approx(rel, abs=1e-12)
     assert s["metrics"]["hybrid"]["spearman_n"] == len(p)
+    part = 100 * np.mean(np.abs(p["energy_kwh_hybrid_physics"] - y) / y)
+    assert s["metrics"]["hybrid"]["mape_physics_part_pct"] == pytest.approx(part, rel=1e-9)
     assert s["metrics"]["hybrid"]["spearman_null_sd"] == pytest.approx(1 / np.sqrt(len(p) - 1))
     n_flag = int(np.ceil(0.1 * len(p)))
     top = p.nlargest(n_flag, "confidence")["trip_id"]
@@ -302,3 +307,33 @@ def test_cli_headline_says_unbounded_and_prints_the_fit_warnings(tmp_path, capsy
     assert "hybridev calibrate: CalibrationWarning" in err
     split = json.loads((tmp_path / "r" / "summary.json").read_text())["split"]
     assert split["group_column"] == "date" and split["n_test_groups"] == 1
+
+
+def test_report_uses_the_vehicle_the_trips_were_read_for(tmp_path, monkeypatch):
+    """read_measured_trips(vehicle=V) then calibration_report(m): the report models V (it
+    used to model the paper's car); a different vehicle= is used, with a warning."""
+    from hybridev import VehicleParams
+
+    own = VehicleParams.from_coastdown(120.0, 0.55, 0.0245, mass_kg=1460.0,
+                                       battery_capacity_kwh=42.0)
+    simulate_measured(make_trips(30, seed=0), noise_rel=0.03, seed=1).to_csv(
+        tmp_path / "m.csv", index=False)
+    m = read_measured_trips(tmp_path / "m.csv", vehicle=own)
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(measured, test, *, vehicle, **kwargs):
+        seen["vehicle"] = vehicle
+        raise Stop
+
+    monkeypatch.setattr(R, "holdout_evaluation", spy)
+    with pytest.raises(Stop):
+        R.calibration_report(m, out_dir=tmp_path / "a")
+    assert seen["vehicle"] is own
+    with pytest.warns(UserWarning, match=r"read for another vehicle \(battery 42 kWh, mass "
+                                         r"1460 kg\).*the report uses vehicle="), \
+            pytest.raises(Stop):
+        R.calibration_report(m, out_dir=tmp_path / "b", vehicle=VehicleParams())
+    assert seen["vehicle"] == VehicleParams()

@@ -123,3 +123,24 @@ def test_regen_bound_does_not_loosen_on_cold_trips():
     s = post.samples[:, post.param_names.index("regen_scale")]
     assert s.max() <= 1.0 / REGEN_EFFICIENCY_MAX + 1e-12
     assert np.median(s) > 1.25  # the data do pull it up, to the bound
+
+
+def test_prior_check_flags_a_parameter_pressed_against_its_hard_bound():
+    """regen_scale's support ends at 1 / REGEN_EFFICIENCY_MAX: a posterior piled against it
+    is flagged (at_bound) though its median is inside the 99 % range; one well inside
+    its support is not."""
+    from hybridev.bayes.posterior import PhysicsPosterior
+    from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
+
+    top = 1.0 / REGEN_EFFICIENCY_MAX
+    rng = np.random.default_rng(0)
+    near = top - np.abs(rng.normal(0.0, 0.03, 400))  # q95 within 1 % of the bound
+    eff = rng.normal(0.9, 0.02, 400)
+    post = PhysicsPosterior(["regen_scale", "drivetrain_efficiency"],
+                            np.column_stack([near, eff]), np.full(400, 0.05),
+                            vehicle=VehicleParams())
+    chk = post.prior_check()
+    assert chk.loc["regen_scale", "inside"] and chk.loc["regen_scale", "at_bound"]
+    assert chk.loc["regen_scale", "bound"] == pytest.approx(top)
+    assert not chk.loc["drivetrain_efficiency", "at_bound"]
+    assert np.isnan(chk.loc["drivetrain_efficiency", "bound"])

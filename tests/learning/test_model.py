@@ -463,6 +463,14 @@ def test_fit_with_logged_traces_runs_the_posterior_on_them(small):
     assert np.all(out.energy_kwh_lo <= out.energy_kwh_hi)
     with pytest.raises(ValueError, match="timeseries"):
         m.predict(small.head(3), timeseries="not a table")
+    # summaries left to the traces: the error says which reader derives them
+    bare = small.drop(columns=["distance_km", "avg_speed_kmh", "temperature_c"])
+    with pytest.raises(ValueError, match=r"missing required column.*read_measured_trips.*"
+                                         r"measured_from_frames"):
+        HybridModel(n_steps=N_STEPS).fit(bare, timeseries=ts)
+    with pytest.raises(ValueError) as exc:  # without traces: no such hint
+        HybridModel(n_steps=N_STEPS).fit(bare)
+    assert "read_measured_trips" not in str(exc.value)
 
 
 def test_trips_without_their_trace_get_the_learned_trace_gap(small, tmp_path):
@@ -510,3 +518,20 @@ def test_fit_warns_when_trips_were_read_for_another_vehicle(small):
         warnings.simplefilter("error", UserWarning)
         HybridModel(**PAPER, vehicle=own, n_steps=N_STEPS, max_epochs=1).fit(m, seed=0)
     assert m.select(np.ones(len(small), dtype=bool)).vehicle is own
+
+
+def test_fit_warns_when_a_posterior_median_leaves_its_prior(small):
+    """Energies 3x too low (e.g. a unit mix-up) push the physics parameters far outside their
+    priors: fit warns, naming them; the model's own data give no such warning."""
+    from hybridev.core.errors import CalibrationWarning
+
+    kw = dict(n_steps=N_STEPS, max_epochs=1, n_members=2, conformal="split")
+    with pytest.warns(CalibrationWarning, match=r"physics posterior: .*prior 99 % range.*"
+                                                r"Check the units of the inputs"):
+        m = HybridModel(**kw).fit(small.assign(energy_kwh=small["energy_kwh"] / 3.0), seed=0)
+    assert not m.posterior_.prior_check()["inside"].all()
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        m = HybridModel(**kw).fit(small, seed=0)
+    assert m.posterior_.prior_check()["inside"].all()
+    assert not [w for w in rec if "physics posterior" in str(w.message)]

@@ -213,7 +213,9 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
     test : array_like of bool, shape (n_trips,)
         Held-out trips (e.g. from :func:`split_trips`).
     vehicle : VehicleParams, optional
-        Nominal vehicle (default: the paper's).
+        Nominal vehicle. Default: the one the trips were read for
+        (``measured.vehicle``, from ``read_measured_trips(..., vehicle=...)``),
+        else the paper's. A ``vehicle`` that differs from the trips' warns.
     seed : int
         Seeds the MCMC, the network training and the predictive draws.
     level : float
@@ -362,7 +364,9 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
         collected in ``rejected``); a DataFrame is validated the same way.
     out_dir : path
     vehicle : VehicleParams, optional
-        Nominal vehicle (default: the paper's).
+        Nominal vehicle. Default: the one the trips were read for
+        (``measured.vehicle``, from ``read_measured_trips(..., vehicle=...)``),
+        else the paper's. A ``vehicle`` that differs from the trips' warns.
     seed : int
         Seeds the split, the MCMC, the training and the predictive draws.
     level : float
@@ -410,6 +414,15 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
                          f"or a DataFrame; got {type(measured).__name__}")
     if len(measured.trips) == 0:
         raise ValueError("measured trips: no valid rows to fit on")
+    read_for = getattr(measured, "vehicle", None)
+    if vehicle is None:
+        vehicle = read_for  # the car the trips were read (and checked) for
+    elif read_for is not None and read_for != vehicle:
+        warnings.warn(f"calibration_report: the measured trips were read for another vehicle "
+                      f"(battery {read_for.battery_capacity_kwh:g} kWh, mass "
+                      f"{read_for.mass_kg:g} kg) than vehicle= (battery "
+                      f"{vehicle.battery_capacity_kwh:g} kWh, mass {vehicle.mass_kg:g} kg); "
+                      "the report uses vehicle=", UserWarning, stacklevel=2)
     t0 = time.perf_counter()
     timing = {}
     with progress_bar(total=4, desc="calibration report", unit="stage", quiet=quiet) as bar:

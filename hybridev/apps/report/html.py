@@ -68,6 +68,21 @@ def _table(df: pd.DataFrame, digits: int = 4) -> str:
                       float_format=lambda v: f"{v:.{digits}g}")
 
 
+def _network_note(s: dict) -> str:
+    """What the residual networks add on the held-out trips, in one sentence."""
+    h = s["metrics"]["hybrid"]
+    part, full = h.get("mape_physics_part_pct"), h.get("mape_pct")
+    if part is None or full is None:
+        return ""
+    if full < part - 0.05:
+        what = f"take the held-out MAPE from {part:.2f} % (their physics part alone) to {full:.2f} %"
+    else:
+        what = (f"do not improve on their physics part here ({full:.2f} % against {part:.2f} % "
+                "held-out MAPE): the calibrated physics, with its discrepancy stage, already "
+                "explains these trips, and the networks mainly set the spread")
+    return f"<p>The hybrid's residual networks {what}.</p>"
+
+
 def _fmt(v, spec: str = ".3g") -> str:
     return "n/a" if v is None else format(v, spec)
 
@@ -132,6 +147,7 @@ rows, {d["n_rejected_timeseries"]} time-series trips; listed below). Physics on 
 {s["config"]["seed"]}, main level {s["level"]:.0%}.</p>
 <h2>Held-out accuracy and calibration</h2>
 {_table(_metrics_table(s))}
+{_network_note(s)}
 <p class="note">MAPE/MAE/RMSE of the point predictions; coverage: share of held-out trips inside
 the central interval; CRPS: continuous ranked probability score; Spearman and AUROC rank the
 predictive standard deviation against the absolute error (AUROC for flagging the worst 10 %).
@@ -154,7 +170,9 @@ correlation scatters by about {_fmt(s["metrics"]["hybrid"].get("spearman_null_sd
 <h2>Calibrated physics parameters (training trips)</h2>
 {_table(params)}
 <p class="note">A median outside its prior's 99 % range is flagged as unphysical: the
-parameter compensates for something the physics does not model. Posterior correlations:</p>
+parameter compensates for something the physics does not model. So does one whose posterior
+presses against a hard bound of its prior (the regeneration limit, the efficiency bounds),
+flagged "at a hard bound" even when its median is inside the range. Posterior correlations:</p>
 {_heater_note(s)}
 {_table(pd.DataFrame(s.get("correlations", [])))}{img["parameters"]}
 <p class="note">Corner plot of the posterior: red lines mark the nominal values, dashed lines the

@@ -117,6 +117,8 @@ def _parameters(post) -> list[dict]:
     s["prior 99 % hi"] = pc["prior_hi"]
     s["inside prior 99 %"] = pd.Series({n: ("yes" if ok else "NO: unphysical")
                                         for n, ok in pc["inside"].items()}, dtype=object)
+    s["at a hard bound"] = pd.Series({n: (f"YES: {b:.4g}" if at else "no") for n, (b, at)
+                                      in pc[["bound", "at_bound"]].iterrows()}, dtype=object)
     return s.reset_index().to_dict(orient="records")
 
 
@@ -212,6 +214,8 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         ``by_bin`` (coverage and mean relative width per temperature band x
         trip length), ``spearman_confidence_rel`` beside ``spearman_distance``
         and ``spearman_energy_pred`` (against the absolute relative error),
+        ``mape_physics_part_pct`` (the hybrid's physics part alone, without the
+        residual networks),
         ``spearman_n`` (held-out trips) and ``spearman_null_sd``
         (``1 / sqrt(n - 1)``, their scatter under no association)
         and ``share_in_domain``. Also ``data``, ``split``,
@@ -232,6 +236,9 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
                        else M.crps_mixture(y, *result.hybrid_mixture))
     hyb.update(_confidence(y, pred["energy_kwh_pred"], pred["confidence"]))
     hyb.update(_by_condition(pred))
+    if "energy_kwh_hybrid_physics" in pred:  # the hybrid's own physics part, without networks
+        hyb["mape_physics_part_pct"] = _point(
+            y, pred["energy_kwh_hybrid_physics"].to_numpy(float))["mape_pct"]
     rej = rejected if rejected is not None else pd.DataFrame(
         columns=["source", "row", "trip_id", "field", "value", "reason"])
     src = rej["source"] if "source" in rej.columns else pd.Series("trips", index=rej.index)
