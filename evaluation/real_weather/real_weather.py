@@ -242,7 +242,9 @@ def main(argv=None) -> int:
         "scores": sc,
         "posterior_all_trips": {
             "summary": post_all.summary(0.9).round(5).reset_index().to_dict("records"),
-            "prior_check": post_all.prior_check().round(5).reset_index().to_dict("records"),
+            "prior_check": (post_all.prior_check().round(5).astype({"bound": object})
+                            .pipe(lambda d: d.where(d.notna(), None))
+                            .reset_index().to_dict("records")),
             "correlations": post_all.correlations().round(3).to_dict(),
             "group_sd": post_all.diagnostics.get("group_sd"),
             "sigma_within": post_all.diagnostics.get("sigma_within"),

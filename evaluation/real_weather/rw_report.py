@@ -137,7 +137,8 @@ def write(out: Path, result: dict, cv: dict, m, extra, post) -> None:
     summ = post.summary(0.9)
     p_rows = [[n, f"{r.prior_centre:.4g}", f"[{r.prior_lo:.4g}, {r.prior_hi:.4g}]",
                f"{r['median']:.4g}", f"[{summ.loc[n, 'q05']:.4g}, {summ.loc[n, 'q95']:.4g}]",
-               f"{r.shift_sd:+.2f}", "yes" if r.inside else "**NO (flagged)**"]
+               f"{r.shift_sd:+.2f}", "yes" if r.inside else "**NO (flagged)**",
+               f"**at {r.bound:.4g} (flagged)**" if r.at_bound else "no"]
               for n, r in pc.iterrows()]
     corr = post.correlations()
     pairs = sorted(((abs(corr.iloc[i, j]), corr.index[i], corr.columns[j], corr.iloc[i, j])
@@ -249,7 +250,13 @@ energy, within-day noise {result['posterior_all_trips']['sigma_within']:.3f}; ch
 converged: {result['posterior_all_trips']['converged']}.
 
 {_md_table(["parameter", "prior centre", "prior 99 % range", "posterior median",
-            "90 % credible interval", "shift (prior sd)", "inside prior 99 %"], p_rows)}
+            "90 % credible interval", "shift (prior sd)", "inside prior 99 %",
+            "pressed against a hard bound"], p_rows)}
+
+"Pressed against a hard bound": the posterior's 95th percentile within 1 % of an upper
+bound of the prior's support (5th percentile of a lower one), `PhysicsPosterior.prior_check`'s
+`at_bound`. Such a parameter compensates for something too, even with its median inside
+the 99 % range.
 
 Strongest posterior correlations:
 
