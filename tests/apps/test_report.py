@@ -136,6 +136,10 @@ def test_summary_matches_recomputation_from_predictions(run):
     rel = stats.spearmanr(p["confidence_rel"], np.abs(p["energy_kwh_pred"] - y) / y).statistic
     assert s["metrics"]["hybrid"]["spearman_confidence_rel"] == pytest.approx(rel, abs=1e-12)
     assert s["metrics"]["hybrid"]["spearman_n"] == len(p)
+    names = [r.get("parameter", r.get("index")) for r in s["parameters"]]
+    # the sampled ones (with the climate scales of a continuous-climate car); the
+    # parameters table adds the relative noise
+    assert s["config"]["physics_params"] == [n for n in names if n != "noise_rel"]
     part = 100 * np.mean(np.abs(p["energy_kwh_hybrid_physics"] - y) / y)
     assert s["metrics"]["hybrid"]["mape_physics_part_pct"] == pytest.approx(part, rel=1e-9)
     assert s["metrics"]["hybrid"]["spearman_null_sd"] == pytest.approx(1 / np.sqrt(len(p) - 1))

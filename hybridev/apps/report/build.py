@@ -324,7 +324,8 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
     if group_column and group_column in measured.trips.columns:
         g = _groups(measured.trips, group_column)
         n_tr_g, n_te_g = len(set(g[~test])), len(set(g[test]))
-    cfg = {"seed": int(seed), "level": float(level), "physics_params": list(physics_params),
+    cfg = {"seed": int(seed), "level": float(level),
+           "physics_params": list(post.param_names),  # sampled (climate scales included)
            "physics_missing_mode": mm if isinstance(mm, str) else getattr(mm, "name", str(mm)),
            "nominal_missing_mode": nominal_mode if isinstance(nominal_mode, str)
            else getattr(nominal_mode, "name", str(nominal_mode)),
