@@ -491,7 +491,8 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         out["in_domain"], out["domain_score"] = ok, score
         if (~ok).any():
             warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=3,
-                               reasons=model.domain_.reasons(at))
+                               reasons=model.domain_.reasons(at),
+                               what="range condition(s) (at the median range)")
     return out
 
 

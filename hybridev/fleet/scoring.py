@@ -25,8 +25,8 @@ import warnings
 
 import pandas as pd
 
-from hybridev.core.errors import OutOfDomainWarning, PhysicsFallbackWarning
-from hybridev.data.timeseries import as_traces
+from hybridev.core.errors import DataWarning, OutOfDomainWarning, PhysicsFallbackWarning
+from hybridev.data.timeseries import COARSE_SAMPLING_S, as_traces
 from hybridev.fleet.partitions import (
     KEY,
     check_dask_frame,
@@ -50,8 +50,16 @@ def _score(part: pd.DataFrame, model, method: str, kwargs: dict,
     dtypes = part.dtypes
     part = plain_strings(part)
     if isinstance(traces, pd.DataFrame):  # a dask partition of the time series
-        traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
-                  if len(traces) else None)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", DataWarning)
+            traces = (as_traces(plain_strings(traces).sort_values([KEY, "t_s"], kind="stable"))
+                      if len(traces) else None)
+        for w in caught:  # one text for every partition, so it is shown once, not per partition
+            text = str(w.message)
+            if issubclass(w.category, DataWarning) and "apart (median" in text:
+                text = (f"timeseries: in some partitions the samples are more than "
+                        f"{COARSE_SAMPLING_S:g} s apart (median): " + text.split("): ", 1)[-1])
+            warnings.warn(text, w.category, stacklevel=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)  # warned once, up front
         warnings.simplefilter("ignore", OutOfDomainWarning)  # the in_domain column

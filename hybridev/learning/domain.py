@@ -308,14 +308,15 @@ class TrainingDomain:
 
 
 def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3,
-                       reasons: dict[str, int] | None = None) -> None:
+                       reasons: dict[str, int] | None = None, what: str = "trip(s)") -> None:
     """Warn (:class:`~hybridev.core.errors.OutOfDomainWarning`) when ``n_out > 0``;
-    ``reasons`` (:meth:`TrainingDomain.reasons`) says which conditions, with counts."""
+    ``reasons`` (:meth:`TrainingDomain.reasons`) says which conditions, with counts;
+    ``what`` names the rows (``"condition(s)"`` for range conditions)."""
     if n_out:
         why = (f" (here: {', '.join(f'{k} {v}' for k, v in reasons.items())})"
                if reasons else "")
         warnings.warn(
-            f"{n_out} of {n_trips} trip(s) lie outside the conditions the model was trained "
+            f"{n_out} of {n_trips} {what} lie outside the conditions the model was trained "
             "on (temperature, speed, distance, duration, grade, or a missing mode / logged "
             f"trace it was trained with){why}: see the in_domain and domain_score columns; "
             "their intervals come from the physics posterior predictive, widened",

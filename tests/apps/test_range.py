@@ -137,7 +137,8 @@ def test_rows_are_independent_and_seeded(model, conditions):
 
 def test_out_of_domain_warning_points_at_the_caller(model):
     cold = grid(temperature_c=[-40.0])
-    with pytest.warns(OutOfDomainWarning) as rec:
+    with pytest.warns(OutOfDomainWarning, match=r"1 of 1 range condition\(s\) \(at the "
+                                                r"median range\) lie outside") as rec:
         predict_range(model, cold, soc_initial=0.9)
     assert any(w.filename == __file__ for w in rec)
 

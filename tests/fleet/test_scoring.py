@@ -100,3 +100,26 @@ def test_logged_traces_pandas_or_dask(client, fitted, lazy_ts):
                                   timeseries=tsd).compute()
     got = got.set_index("trip_id").loc[ref.trip_id].reset_index()  # shuffled by trip_id
     _same(got[ref.columns], ref)
+
+
+def test_coarse_sampling_warns_with_one_text_for_every_partition(fitted):
+    """A coarsely sampled dask time series: each partition checks its own traces, and
+    says so in one text (shown once), not with each partition's own median."""
+    import warnings
+
+    import dask
+
+    from hybridev.core.errors import DataWarning
+
+    trips = _trips(40)
+    ts = _timeseries(trips.trip_id.to_numpy()[:15])
+    step = 3 + ts["trip_id"] % 4  # 3-6 s between samples: the partitions' medians differ
+    ts = ts[ts["t_s"] % step == 0]
+    with warnings.catch_warnings(record=True) as rec, dask.config.set(scheduler="sync"):
+        warnings.simplefilter("always")
+        fitted.predict_interval(dd.from_pandas(trips, npartitions=3), 0.8, seed=1,
+                                timeseries=dd.from_pandas(ts, npartitions=4)).compute()
+    texts = {str(w.message) for w in rec if issubclass(w.category, DataWarning)}
+    assert len(texts) == 1
+    assert next(iter(texts)).startswith("timeseries: in some partitions the samples are more "
+                                        "than 2 s apart (median): between samples")
