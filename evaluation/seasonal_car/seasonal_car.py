@@ -231,8 +231,14 @@ def write(out_dir: Path, result: dict) -> None:
                   f"{'heat pump' if r['car']['heat_pump'] else 'PTC'}); the `nnls_stats` "
                   "baseline uses the same fold's heater terms."]
         inside = r["both_seasons"]["posteriors_inside_prior_99"]
+        pressed = [", ".join(f"{x['parameter']} {x['median']:.3g} (bound {x['bound']:.4g})"
+                             for x in fold if x.get("at_bound")) or "none"
+                   for fold in r["both_seasons"]["prior_check"]]
         lines += ["", f"Fold posteriors with every median inside its prior's 99 % range: "
-                  f"{inside}.", "", "### Season shift", "",
+                  f"{inside}. Parameters pressed against a hard bound of their prior "
+                  "(95th percentile within 1 % of it; they compensate for something the "
+                  f"physics does not model), by fold: {'; '.join(pressed)}.", "",
+                  "### Season shift", "",
                   "| trained on -> tested on | n test | hybrid MAPE % | bias % | flagged | "
                   "coverage unflagged (n) | coverage flagged (n) | width flagged | "
                   "Spearman conf_rel / distance | heater learned |",
@@ -258,7 +264,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=HERE, help="output folder")
     ap.add_argument("--days", type=int, default=30, help="days per season per car")
     ap.add_argument("--cars", nargs="*", default=list(sc_truth.CARS), help="truth cars")
+    ap.add_argument("--from-json", action="store_true",
+                    help="rewrite seasonal_car.md from the saved seasonal_car.json (no fits)")
     args = ap.parse_args(argv)
+    if args.from_json:
+        write(args.out, json.loads((args.out / "seasonal_car.json").read_text()))
+        print(f"wrote {args.out / 'seasonal_car.md'} from seasonal_car.json")
+        return 0
     t0 = time.perf_counter()
     result = {"level": LEVEL, "seed": SEED, "truth_seed": TRUTH_SEED, "cars": {}}
     for i, name in enumerate(args.cars):
