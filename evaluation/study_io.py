@@ -14,7 +14,7 @@ from pathlib import Path
 
 from hybridev.core.fileio import atomic_path
 
-__all__ = ["DEFAULT_DATA", "run_study"]
+__all__ = ["DEFAULT_DATA", "run_study", "write_markdown"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "realtrips"
 """The M1 trips beside the repository (``../shared/realtrips``)."""
@@ -38,3 +38,11 @@ def run_study(doc: str, name: str, run: Callable[[Path], list], default_out: Pat
     with atomic_path(args.out / f"{name}.json") as tmp:
         Path(tmp).write_text(json.dumps(res, indent=1))
     return res, args.out
+
+
+def write_markdown(out: Path, name: str, lines: list[str], runtime_s: float) -> int:
+    """Write ``<out>/<name>.md`` atomically from ``lines``, say so, and return exit code 0."""
+    with atomic_path(out / f"{name}.md") as tmp:
+        Path(tmp).write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / f'{name}.md'} in {runtime_s} s")
+    return 0

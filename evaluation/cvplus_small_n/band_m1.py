@@ -27,10 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mechanism as mech  # the band-normalised interval
 import shift_and_small_data as ssd  # the M1 loader, folds and picks
-from study_io import run_study  # command line and JSON output
+from study_io import run_study, write_markdown  # command line and JSON output
 
 from hybridev import HybridModel
-from hybridev.core.fileio import atomic_path
 
 HERE = Path(__file__).resolve().parent
 SIZES = (20, 40)
@@ -109,10 +108,7 @@ def main(argv=None) -> int:
                          f"{ms([r[name]['rel_width'] for r in sel])} | "
                          f"{ms([r[name]['coverage_1'] for r in sel])} | "
                          f"{ms([r[name]['coverage_2'] for r in sel])} |")
-    with atomic_path(out / "band_m1.md") as tmp:
-        Path(tmp).write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'band_m1.md'} in {res['runtime_s']} s")
-    return 0
+    return write_markdown(out, "band_m1", lines, res["runtime_s"])
 
 
 if __name__ == "__main__":

@@ -28,10 +28,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "shift_and_small_data"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import shift_and_small_data as ssd  # the M1 loader
-from study_io import run_study  # command line and JSON output
+from study_io import run_study, write_markdown  # command line and JSON output
 
 from hybridev import HybridModel
-from hybridev.core.fileio import atomic_path
 
 HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
@@ -92,10 +91,7 @@ def main(argv=None) -> int:
     shares = ", ".join(f"{r['without_trace']['flagged']:.2f}" for r in rows)
     lines += ["", f"Share of the trips predicted without their trace flagged out of the "
               f"domain, per fold: {shares}."]
-    with atomic_path(out / "trace_gap.md") as tmp:
-        Path(tmp).write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'trace_gap.md'} in {res['runtime_s']} s")
-    return 0
+    return write_markdown(out, "trace_gap", lines, res["runtime_s"])
 
 
 if __name__ == "__main__":
