@@ -95,6 +95,7 @@ def load_realtrips(root: Path = DATA, vehicle: VehicleParams = VEHICLE
         "temperature_c": src["amb_temp_mean_c"],
         "energy_kwh": src["e_batt_net_kwh"],
         "soc_initial": SOC_INITIAL,
+        "start_time": src["start_time_local"],  # minutes parked before each trip
         # the day of the trip (its session when undated): calibrate_physics's default
         # groups="auto" gives each day a random effect
         "date": src["date"].astype(object).where(

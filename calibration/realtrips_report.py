@@ -114,7 +114,8 @@ def build_tables(root: Path = DATA) -> tuple[pd.DataFrame, pd.DataFrame]:
     ``energy_kwh`` (= ``e_batt_net_kwh``, terminal energy V*I), ``hour``
     (decimal hour of ``start_time_local``), ``soc_initial`` (the constant
     :data:`SOC_INITIAL`: the source has no SoC), ``mode`` (None: real logs are
-    not labelled). Time series: ``trip_id``, ``t_s``, ``speed_kmh``,
+    not labelled), ``start_time`` (= ``start_time_local``: the reader derives
+    the minutes parked before each trip, ``parked_min``). Time series: ``trip_id``, ``t_s``, ``speed_kmh``,
     ``elevation_m``, ``amb_temp_c``.
     """
     src = pd.read_csv(root / "trips.csv")
@@ -129,6 +130,7 @@ def build_tables(root: Path = DATA) -> tuple[pd.DataFrame, pd.DataFrame]:
         "hour": start.dt.hour + start.dt.minute / 60.0 + start.dt.second / 3600.0,
         "soc_initial": SOC_INITIAL,
         "mode": None,
+        "start_time": src["start_time_local"],  # minutes parked before each trip
     })
     ts = pd.read_parquet(root / "timeseries_1hz.parquet",
                          columns=["trip_id", "t_s", "speed_kmh", "elevation_m", "amb_temp_c"])
@@ -355,7 +357,8 @@ Full HTML report: {html}.
 * **Pipeline**: `hybridev.apps.report.build.calibration_report`, the library function behind
   `hybridev calibrate`, on the measured-trip table built from `trips.csv` (`trip_id`,
   `session_group`, `distance_km`, `avg_speed_kmh` = `mean_speed_kmh`, `temperature_c` =
-  `amb_temp_mean_c`, `energy_kwh` = `e_batt_net_kwh`, `hour` from `start_time_local`,
+  `amb_temp_mean_c`, `energy_kwh` = `e_batt_net_kwh`, `hour` and `start_time` from
+  `start_time_local` (the reader derives the minutes parked before each trip),
   `soc_initial` = {SOC_INITIAL} (an assumption: the source has no SoC), `mode` = none) and the
   1 Hz time series (`speed_kmh`, `elevation_m`, `amb_temp_c`), read by
   `hybridev.data.logs.measured_from_frames`.

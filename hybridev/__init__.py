@@ -89,6 +89,7 @@ _LAZY = {
     "make_dataset": "physics.truth",
     "noise_floor_pct": "physics.oracle",
     "oracle_energy_kwh": "physics.oracle",
+    "parked_minutes": "data.parked",
 }
 """Public names imported on first access, and the module that defines each."""
 
@@ -154,6 +155,7 @@ __all__ = [
     "mixture_quantile",
     "noise_floor_pct",
     "oracle_energy_kwh",
+    "parked_minutes",
     "plan_charging",
     "plan_charging_from_distribution",
     "plot_soc_fan",

@@ -715,7 +715,15 @@ CALIBRATION = [
         from realtrips_physics import LOGGED, VEHICLE
         from realtrips_report import load
 
-        real = load(DATA)  # MeasuredTrips with the logged traces
+        import warnings
+
+        from hybridev import DataWarning
+
+        with warnings.catch_warnings(record=True) as caught:  # shown here, not on stderr
+            warnings.simplefilter("always", DataWarning)
+            real = load(DATA)  # MeasuredTrips with the logged traces
+        for w in caught:
+            print(f"{w.category.__name__}: {w.message}")
         print(f"{len(real.trips)} valid trips with {len(real.traces)} logged traces, "
               f"{real.n_rejected} rejected")
         display(real.rejected[["trip_id", "field", "reason"]].head(3))

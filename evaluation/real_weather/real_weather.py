@@ -103,7 +103,8 @@ def load(root: Path, vehicle: VehicleParams) -> tuple[MeasuredTrips, pd.DataFram
         "trip_id": src["trip_id"].astype(str), "distance_km": src["distance_km"],
         "avg_speed_kmh": src["mean_speed_kmh"], "temperature_c": src["amb_temp_mean_c"],
         "energy_kwh": src["e_batt_net_kwh"], "soc_initial": 0.8,  # no SoC in the source
-        "date": day.astype(str), "session_group": src["session_group"].astype(str)})
+        "date": day.astype(str), "session_group": src["session_group"].astype(str),
+        "start_time": src["start_time_local"]})
     ts = pd.read_parquet(root / "timeseries_1hz.parquet",
                          columns=["trip_id", "t_s", "speed_kmh", "elevation_m", "amb_temp_c"])
     ts["trip_id"] = ts["trip_id"].astype(str)
@@ -236,6 +237,7 @@ def main(argv=None) -> int:
         post_all = calibrate_physics(m, vehicle, seed=SEED)
     result = {
         "n_trips": len(m.trips), "n_days": int(m.trips["date"].nunique()),
+        "n_short_stop": int((m.trips["parked_min"].to_numpy(float) < 30.0).sum()),
         "n_folds": N_FOLDS, "vehicle": {"coastdown": COASTDOWN,
                                         "climate_model": vehicle.climate_model,
                                         "heater_kind": vehicle.heater_kind},

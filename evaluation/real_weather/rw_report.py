@@ -197,8 +197,11 @@ and ambient temperature) is described only by its coast-down road load and test 
 mass_kg={cd['mass_kg']:g})`. Everything else is a library default: the continuous climate
 model with compact-BEV values (PTC heater), `calibrate_physics` defaults (road-load
 priors tightened by the coast-down, climate scales sampled, a day random effect from
-the `date` column), `HybridModel(vehicle=...)` defaults. Nothing is read from the data's
-README. Cross-validation: {result['n_folds']} folds grouped by `date` (no day in both
+the `date` column), `HybridModel(vehicle=...)` defaults. The logger's start times
+(`start_time` = `start_time_local`) give each trip the minutes the car stood parked
+before it (`parked_min`, derived by the reader; {result.get('n_short_stop', 'n/a')} of the
+trips start less than 30 min after the previous one ended, so their cabin is still
+warm or cool). Nothing is read from the data's README. Cross-validation: {result['n_folds']} folds grouped by `date` (no day in both
 training and test); every trip is predicted once, by models that never saw its day.
 
 ## Targets

@@ -25,8 +25,12 @@ hybridev's physics cannot fit it by construction:
 * **Cabin**: a first-order thermal model (``C dT/dt``) with a speed-dependent
   conductance, fresh-air ventilation, occupants and sun; each driver has their own set
   point and their own threshold for switching the A/C on; heating by a heat pump
-  (``COP(T_amb)``) with a PTC booster, or by a PTC heater alone; the cabin starts at
-  the soak temperature (ambient, a garage, or pre-conditioned from the grid).
+  (``COP(T_amb)``) with a PTC booster, or by a PTC heater alone; the first trip of a
+  day starts at the soak temperature (ambient, a garage, or pre-conditioned from the
+  grid); later trips start where the parked cabin and pack have cooled to, with the
+  truth's own standstill conductances (``cabin_ua_w_per_k``, 8 W/K for the pack).
+* **Schedule**: 2-5 trips a day from 6:30-9:30; 45 % of later trips follow the
+  previous one after a 2-25 min stop (errand chains), the others after 1-5 h.
 * **Auxiliaries**: a base load plus lights at night and seat heaters in winter.
 * **Measurement**: the energy is the integral of battery power with 1 % gauge noise.
 
@@ -161,8 +165,8 @@ def _hp_cop(t_amb: float) -> float:
 def _energy(car: TruthCar, v: np.ndarray, z: np.ndarray, t_amb: np.ndarray, *,
             wind_mps: float, roll_factor: float, t_set: float, ac_on_above: float,
             cabin0: float, pack0: float, soc0: float, night: bool, seat_heat: bool
-            ) -> float:
-    """Battery energy of one trip, kWh (the truth's model, 1 s steps)."""
+            ) -> tuple[float, float, float]:
+    """Battery energy of one trip, kWh, and the cabin and pack temperatures at its end."""
     dt = 1.0
     vm = 0.5 * (v[1:] + v[:-1])
     acc = np.diff(v) / dt
@@ -242,7 +246,7 @@ def _energy(car: TruthCar, v: np.ndarray, z: np.ndarray, t_amb: np.ndarray, *,
         p_batt = p_term + p_loss
         pack_t += dt * (p_loss + p_heat * 0.9 - 8.0 * (pack_t - ta[i])) / pack_c
         e_j += p_batt * dt
-    return e_j / 3.6e6
+    return e_j / 3.6e6, float(cabin_t), float(pack_t)
 
 
 def _days(rng: np.random.Generator, season: str, n_days: int) -> list[dict]:
@@ -268,7 +272,8 @@ def simulate_car(car: TruthCar, *, n_days_per_season: int = 30, seed: int = 0
 
     Trip table columns: ``trip_id``, ``date``, ``season``, ``soc_initial``,
     ``energy_kwh`` (measured), ``temperature_c`` (trip mean of the car's sensor),
-    ``distance_km``, ``avg_speed_kmh``, ``duration_s``, ``hour``. Time series:
+    ``distance_km``, ``avg_speed_kmh``, ``duration_s``, ``hour``, ``start_time``
+    (local, to the second). Time series:
     ``trip_id``, ``t_s``, ``speed_kmh``, ``elevation_m`` (GPS, rounded to 1 m),
     ``amb_temp_c`` (the car's sensor, 0.5 degC steps).
 
@@ -282,9 +287,15 @@ def simulate_car(car: TruthCar, *, n_days_per_season: int = 30, seed: int = 0
     soc = 0.9
     for d in days:
         n_trips = int(rng.integers(2, 6))
-        hours = np.sort(rng.uniform(6.5, 21.5, n_trips))
-        first = True
-        for h in hours:
+        h = rng.uniform(6.5, 9.5)  # first departure
+        end_h = cab_end = pack_end = 0.0
+        for k in range(n_trips):
+            if k:  # an errand chain (a short stop) or a later trip of the day
+                gap_h = (rng.uniform(2.0, 25.0) / 60.0 if rng.random() < 0.45
+                         else rng.uniform(1.0, 5.0))
+                h = end_h + gap_h
+                if h > 21.5:
+                    break
             kind = rng.choice(["errand", "commute", "long"], p=[0.4, 0.45, 0.15])
             v = _trace(rng, str(kind))
             s_m = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))])
@@ -292,24 +303,33 @@ def simulate_car(car: TruthCar, *, n_days_per_season: int = 30, seed: int = 0
             dur = len(v) - 1
             diurnal = -4.0 * np.cos(2 * np.pi * (h - 4.0) / 24.0)
             t_amb = d["t_mean"] + diurnal + np.linspace(0.0, rng.normal(0.0, 0.8), len(v))
-            garage = rng.random() < 0.4 and first
-            soak = t_amb[0] + (rng.uniform(4.0, 9.0) if garage else 0.0)
-            precond = t_amb[0] < 5.0 and first and rng.random() < 0.3  # from the grid
-            cabin0 = 18.0 if precond else soak + (6.0 if t_amb[0] > 20 and rng.random() < 0.5
-                                                  else 0.0)
-            pack0 = soak + (rng.uniform(3.0, 10.0) if not first else 0.0)
+            sunny = t_amb[0] > 20 and rng.random() < 0.5  # a car parked in the sun
+            if k == 0:
+                garage = rng.random() < 0.4
+                soak = t_amb[0] + (rng.uniform(4.0, 9.0) if garage else 0.0)
+                precond = t_amb[0] < 5.0 and rng.random() < 0.3  # from the grid
+                cabin0 = 18.0 if precond else soak + (6.0 if sunny else 0.0)
+                pack0 = soak
+            else:  # parked: the truth's own first-order cabin and pack relax to ambient
+                gap_s = (h - end_h) * 3600.0
+                target = t_amb[0] + (6.0 if sunny else 0.0)
+                cabin0 = target + (cab_end - target) * np.exp(
+                    -gap_s * car.cabin_ua_w_per_k / (car.cabin_c_kj_per_k * 1e3))
+                pack0 = t_amb[0] + (pack_end - t_amb[0]) * np.exp(
+                    -gap_s * 8.0 / (car.pack_heat_capacity_kj_per_k * 1e3))
             if soc < 0.3:
                 soc = rng.uniform(0.8, 1.0)  # charged overnight
-            e = _energy(car, v, z, t_amb, wind_mps=rng.normal(0.0, d["wind_sd"]),
-                        roll_factor=(1.12 if d["winter_tyres"] else 1.0)
-                        * (1.15 if d["wet"] else 1.0),
-                        t_set=t_set, ac_on_above=ac_on, cabin0=cabin0, pack0=pack0,
-                        soc0=soc, night=bool(h < 7.0 or h > 19.0
-                                             or (d["winter_tyres"] and h > 16.5)),
-                        seat_heat=t_amb[0] < 3.0)
+            e, cab_end, pack_end = _energy(
+                car, v, z, t_amb, wind_mps=rng.normal(0.0, d["wind_sd"]),
+                roll_factor=(1.12 if d["winter_tyres"] else 1.0) * (1.15 if d["wet"] else 1.0),
+                t_set=t_set, ac_on_above=ac_on, cabin0=cabin0, pack0=pack0,
+                soc0=soc, night=bool(h < 7.0 or h > 19.0 or (d["winter_tyres"] and h > 16.5)),
+                seat_heat=t_amb[0] < 3.0)
+            end_h = h + dur / 3600.0
             tid = f"{car.name.split(',')[0].replace(' ', '_')}_{len(rows):04d}"
             meas = e * (1.0 + rng.normal(0.0, 0.01))
             sensor = np.round((t_amb + rng.normal(0.0, 0.3)) * 2.0) / 2.0
+            start = pd.Timestamp(d["date"]) + pd.Timedelta(seconds=round(h * 3600.0))
             rows.append({"trip_id": tid, "date": d["date"],
                          "season": "summer" if d["date"][5:7] in ("06", "07", "08")
                          else "winter",
@@ -317,11 +337,10 @@ def simulate_car(car: TruthCar, *, n_days_per_season: int = 30, seed: int = 0
                          "temperature_c": float(sensor.mean()),
                          "distance_km": float(s_m[-1] / 1000.0),
                          "avg_speed_kmh": float(s_m[-1] / dur * 3.6), "duration_s": float(dur),
-                         "hour": float(h)})
+                         "hour": float(h), "start_time": start.isoformat(sep=" ")})
             series.append(pd.DataFrame({
                 "trip_id": tid, "t_s": np.arange(len(v), dtype=float),
                 "speed_kmh": v * 3.6, "elevation_m": np.round(z), "amb_temp_c": sensor}))
             soc -= e / car.capacity_kwh
             soc = max(soc, 0.05)
-            first = False
     return pd.DataFrame(rows), pd.concat(series, ignore_index=True)

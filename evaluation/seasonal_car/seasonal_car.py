@@ -11,7 +11,7 @@ script checks the winter path on two synthetic cars whose truth
 motor loss map, a cabin thermal model with a heat pump or a PTC heater, a pack heater,
 cold tyres, wind and wet roads. hybridev gets only what a user has: the coast-down
 ``A, B, C``, the test mass and the usable capacity, and per trip the 1 Hz trace,
-date, SoC at departure and measured energy.
+date, start time, SoC at departure and measured energy.
 
 Set-up, for each car (defaults only, nothing tuned to the truth):
 
@@ -21,6 +21,8 @@ Set-up, for each car (defaults only, nothing tuned to the truth):
   ``HybridModel`` defaults, NNLS on the physics' sufficient statistics, a linear
   regression on trip summaries, distance x median kWh/km); bias by season; the
   hybrid's 90 % intervals (coverage and width, by season);
+* **parking time**: the same CV with the logger's start times dropped (every trip
+  then starts with a soaked cabin), MAPE on trips after a short stop and on the others;
 * **season shift**: fitted on one season, tested on the other (and the reverse):
   MAPE, the share of trips flagged out of domain, coverage of flagged and unflagged
   trips, and the Spearman correlation of ``confidence_rel`` with the relative error.
@@ -64,7 +66,7 @@ def user_data(car: sc_truth.TruthCar, n_days: int, seed: int):
     vehicle = VehicleParams.from_coastdown(car.a_n, car.b_n_per_kmh, car.c_n_per_kmh2,
                                            mass_kg=car.mass_kg,
                                            battery_capacity_kwh=car.capacity_kwh)
-    table = trips[["trip_id", "date", "soc_initial", "energy_kwh", "hour"]]
+    table = trips[["trip_id", "date", "soc_initial", "energy_kwh", "hour", "start_time"]]
     m = measured_from_frames(table, ts, vehicle)
     if m.n_rejected:
         raise RuntimeError(f"the truth produced rejected trips:\n{m.rejected}")
@@ -112,6 +114,7 @@ def both_seasons(vehicle, m, extra, *, heat_pump: bool = False) -> dict:
 
     cv = rw.cross_validate(m, extra, vehicle)
     sc = rw.scores(cv["y"], cv["pred"], m.trips, extra)
+    ablation = parking_ablation(vehicle, m, extra, cv)
     season = extra["season"].to_numpy()
     y = cv["y"]
     for k, p in cv["pred"].items():
@@ -150,12 +153,47 @@ def both_seasons(vehicle, m, extra, *, heat_pump: bool = False) -> dict:
                     "mape_by_season_pct": {s: float(np.abs(r[season == s]).mean() * 100)
                                            for s in ("summer", "winter")}}
     return {"scores": sc, "intervals": ints, "hybrid_heat_pump_declared": declared,
+            "parking_ablation": ablation,
             "heater_kind_by_fold": cv["heater_by_fold"],
             "heater_log_evidence_by_fold": cv["heater_log_evidence_by_fold"],
             "posteriors_inside_prior_99": [
         bool(p.prior_check()["inside"].all()) for p in cv["posteriors"]],
         "prior_check": [p.prior_check().round(4).reset_index().to_dict("records")
                         for p in cv["posteriors"]]}
+
+
+SHORT_STOP_MIN = 30.0
+"""Trips that start less than this many minutes after the previous one ended."""
+ABLATED = ("nominal_physics", "calibrated_physics", "hybrid", "nnls_stats")
+
+
+def parking_ablation(vehicle, m, extra, cv: dict) -> dict:
+    """The same CV without the trips' start times (every trip taken as soaked).
+
+    MAPE overall and on trips after a short stop (< ``SHORT_STOP_MIN``) or not, by
+    season, for the physics-based methods, with the logger's start times (``cv``, the
+    default run) and without them (``start_time`` and ``parked_min`` dropped).
+    """
+    bare = dataclasses.replace(m, trips=m.trips.drop(columns=["start_time", "parked_min"]))
+    cv_bare = rw.cross_validate(bare, extra, vehicle)
+    y = cv["y"]
+    parked = m.trips["parked_min"].to_numpy(float)
+    short = parked < SHORT_STOP_MIN  # NaN (first trip of the log): not short
+    season = extra["season"].to_numpy()
+    out = {"n_short": int(short.sum()), "n_other": int((~short).sum()),
+           "n_short_winter": int((short & (season == "winter")).sum())}
+    for label, c in (("with_start_times", cv), ("without_start_times", cv_bare)):
+        out[label] = {}
+        for k in ABLATED:
+            ape = np.abs(c["pred"][k] / y - 1.0) * 100
+            out[label][k] = {
+                "all": float(ape.mean()), "short_stop": float(ape[short].mean()),
+                "other": float(ape[~short].mean()),
+                **{f"{sn}_{part}": float(ape[(season == sn) & sel].mean())
+                   for sn in ("summer", "winter")
+                   for part, sel in (("short_stop", short), ("other", ~short))},
+                "bias_short_stop": float((c["pred"][k] / y - 1.0)[short].mean() * 100)}
+    return out
 
 
 def season_shift(vehicle, m, extra, train_season: str) -> dict:
@@ -215,6 +253,23 @@ def write(out_dir: Path, result: dict) -> None:
                       f"{hp['mape_by_season_pct']['summer']:.2f} %, winter "
                       f"{hp['mape_by_season_pct']['winter']:.2f} %, bias "
                       f"{hp['bias_pct']:+.2f} %)."]
+        ab = r["both_seasons"].get("parking_ablation")
+        if ab is not None:
+            lines += ["", "Parking time (the logger's start times give `parked_min`; without "
+                      "them every trip starts with a soaked cabin): MAPE % of the same CV, on "
+                      f"the {ab['n_short']} trips that start less than "
+                      f"{SHORT_STOP_MIN:.0f} min after the previous one ended "
+                      f"({ab['n_short_winter']} in winter) and on the {ab['n_other']} others:",
+                      "", "| method | start times | all | short stop | short stop, winter | "
+                      "short stop, summer | others | bias on short stops % |",
+                      "|---|---|---|---|---|---|---|---|"]
+            for k in ABLATED:
+                for label, name in (("with_start_times", "given"),
+                                    ("without_start_times", "dropped")):
+                    a = ab[label][k]
+                    lines.append(f"| {k} | {name} | {a['all']:.2f} | {a['short_stop']:.2f} | "
+                                 f"{a['winter_short_stop']:.2f} | {a['summer_short_stop']:.2f} | "
+                                 f"{a['other']:.2f} | {a['bias_short_stop']:+.2f} |")
         ints = r["both_seasons"]["intervals"]
         lines += ["", f"Hybrid {LEVEL:.0%} intervals, held out:", "",
                   "| trips | n | coverage | mean width / energy | flagged |", "|---|---|---|---|---|"]

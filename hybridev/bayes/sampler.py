@@ -54,6 +54,7 @@ from hybridev.bayes.priors import (
 from hybridev.core.checks import check_seed
 from hybridev.data.logs import MeasuredTrips, measured_from_frames
 from hybridev.data.measured import validate_measured_trips
+from hybridev.data.parked import with_parked_minutes
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, energy_from_stats
 from hybridev.physics.stats_build import trip_stats
@@ -95,7 +96,11 @@ def _prepare(measured_trips, vehicle, timeseries) -> tuple[pd.DataFrame, LoggedT
                                  "hybridev.data.logs.read_measured_trips)")
             trips, traces = m.trips, m.traces
         else:
-            trips, _ = validate_measured_trips(measured_trips, vehicle)
+            if traces is not None and not isinstance(traces, LoggedTraces):
+                raise ValueError("timeseries must be a LoggedTraces or a time-series DataFrame; "
+                                 f"got {type(traces).__name__}")
+            trips, _ = validate_measured_trips(with_parked_minutes(measured_trips, traces),
+                                               vehicle)
     if traces is not None and not isinstance(traces, LoggedTraces):
         raise ValueError("timeseries must be a LoggedTraces or a time-series DataFrame; got "
                          f"{type(traces).__name__}")

@@ -19,6 +19,7 @@ import pandas as pd
 from hybridev.core.errors import DataWarning
 from hybridev.core.fileio import read_table
 from hybridev.data.measured import validate_measured_trips
+from hybridev.data.parked import with_parked_minutes
 from hybridev.data.timeseries import (
     REJECTED_COLUMNS,
     validate_timeseries,
@@ -288,6 +289,8 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
         match_traces(trips, traces, warn=False)
         mismatch = _trace_mismatch(trips, traces)
         table = _derive_from_traces(trips, traces)
+    # before any row is rejected: every trip driven warms the cabin for the next one
+    table = with_parked_minutes(table, traces)
     extra = []
     if isinstance(table, pd.DataFrame) and "trip_id" in table.columns:
         tid = table["trip_id"].astype(object)

@@ -69,6 +69,12 @@ def _score(part: pd.DataFrame, model, method: str, kwargs: dict,
 
 def _lazy(model, ddf, method: str, kwargs: dict, timeseries):
     ddf = check_dask_frame(ddf)
+    if "start_time" in ddf.columns and "parked_min" not in ddf.columns:
+        # a trip's parking time needs the trip before it, which may sit in another partition
+        raise ValueError("trips: a dask frame with 'start_time' needs a 'parked_min' column "
+                         "(minutes parked before each trip); derive it per vehicle with "
+                         "hybridev.data.parked.parked_minutes on pandas, or drop 'start_time' "
+                         "to treat every trip as starting soaked")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsFallbackWarning)
         meta = output_meta(lambda t: getattr(model, method)(t, **kwargs), ddf._meta)

@@ -117,8 +117,10 @@ def calibrate_vehicle(trips: pd.DataFrame, *, vehicle, seed: int = 0, level: flo
         Report columns (see :mod:`hybridev.fleet.calibrate`) and ``"_post"``:
         the posterior medians and variances on the prior scale.
     """
+    from hybridev.data.parked import with_parked_minutes
     from hybridev.fleet.borrowing import LOG_PARAMS
 
+    trips = with_parked_minutes(trips)  # from start_time, on the whole log before the split
     test, split = split_trips(trips, test_fraction, group_column, seed)
     train, held = trips.loc[~test], trips.loc[test]
     with warnings.catch_warnings():

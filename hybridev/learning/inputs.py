@@ -55,6 +55,10 @@ def unpack_trips(trips, timeseries=None):
     """``(trip_table, traces)`` from a table or a :class:`~hybridev.data.logs.MeasuredTrips`.
 
     A ``MeasuredTrips`` brings its own traces; an explicit ``timeseries`` wins.
+    A table with a ``start_time`` column and no ``parked_min`` gets the minutes
+    parked before each trip derived from the table's own rows
+    (:func:`hybridev.data.parked.with_parked_minutes`), as ``fit`` and the log
+    readers do.
 
     Examples
     --------
@@ -63,11 +67,13 @@ def unpack_trips(trips, timeseries=None):
     True
     """
     from hybridev.data.logs import MeasuredTrips  # data layer: below learning
+    from hybridev.data.parked import with_parked_minutes
     from hybridev.data.timeseries import as_traces
 
     if isinstance(trips, MeasuredTrips):
         return trips.trips, (trips.traces if timeseries is None else as_traces(timeseries))
-    return trips, as_traces(timeseries)
+    traces = as_traces(timeseries)
+    return with_parked_minutes(trips, traces), traces
 
 
 def check_read_vehicle(read_for: VehicleParams | None, own: VehicleParams | None) -> None:

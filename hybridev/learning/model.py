@@ -58,6 +58,7 @@ from hybridev.core.errors import CalibrationWarning, PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
+from hybridev.data.parked import with_parked_minutes
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
@@ -537,7 +538,11 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         ----------
         measured_trips : pandas.DataFrame
             A measured-trip table (:func:`hybridev.data.measured.validate_measured_trips`):
-            trip columns plus ``energy_kwh`` (kWh) and/or ``soc_final``.
+            trip columns plus ``energy_kwh`` (kWh) and/or ``soc_final``. With a
+            ``start_time`` column and no ``parked_min``, the minutes parked
+            before each trip are derived from the table
+            (:mod:`hybridev.data.parked`): a trip after a short stop starts
+            with a warm cabin.
         seed : int
             Seeds the validation split, initialisation, data order and dropout.
         timeseries : LoggedTraces or pandas.DataFrame, optional
@@ -581,6 +586,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             measured_trips = measured_trips.trips
         else:
             traces = as_traces(timeseries)
+            measured_trips = with_parked_minutes(measured_trips, traces)
         try:
             good, _ = validate_measured_trips(measured_trips, self._vehicle(), on_error="raise")
         except ValueError as err:
@@ -702,7 +708,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
         ----------
         trips : pandas.DataFrame, MeasuredTrips or dask.dataframe.DataFrame
             A trip table; ``mode`` may be missing or ``None`` and ``hour``
-            missing (see the module docstring). A
+            missing (see the module docstring). A ``start_time`` column without
+            ``parked_min`` derives it from the table's rows, as ``fit`` does. A
             :class:`~hybridev.data.logs.MeasuredTrips` brings its traces. A dask
             DataFrame gives a lazy dask DataFrame with the same rows
             (:mod:`hybridev.fleet.scoring`, needs ``pip install hybridev[dask]``).

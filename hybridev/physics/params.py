@@ -165,6 +165,19 @@ class VehicleParams:
         known to heat its pack.
     battery_heat_below_c : float
         Pack temperature threshold of the battery heater, degC.
+    cabin_soak_time_constant_s : float
+        Time constant with which a parked cabin relaxes to ambient temperature,
+        s. A trip that starts ``p`` seconds after the previous one ended (the
+        trip column ``parked_min``) pays the share ``1 - exp(-p / tau)`` of the
+        cabin's warm-up (cool-down), see
+        :func:`hybridev.physics.thermal.soak_fraction`: back-to-back trips start
+        with a warm cabin. 1000 s = ``cabin_heat_capacity_kj_per_k`` (60 kJ/K)
+        over the parked cabin's conductance, the body and glazing part of
+        ``cabin_ua_w_per_k`` (~60 W/K; the fan and its fresh-air stream are off
+        when parked). Trips with no ``parked_min`` are taken as soaked.
+    battery_soak_time_constant_s : float
+        The same for the pack (and ``battery_warmup_kwh_per_k``), s: ~0.1 kWh/K
+        (360 kJ/K) of pack over ~10 W/K through an insulated enclosure, 10 h.
     cold_traction_loss_per_k : float
         Extra traction energy per kelvin below ``cold_ref_c`` (fraction): cold
         battery resistance, viscous driveline losses, tyres and denser air.
@@ -220,6 +233,8 @@ class VehicleParams:
     cabin_heat_capacity_kj_per_k: float = 60.0
     battery_warmup_kwh_per_k: float = 0.0
     battery_heat_below_c: float = 5.0
+    cabin_soak_time_constant_s: float = 1000.0
+    battery_soak_time_constant_s: float = 36000.0
     cold_traction_loss_per_k: float = 0.004
     cold_regen_loss_per_k: float = 0.01
     cold_ref_c: float = 20.0
@@ -253,6 +268,8 @@ class VehicleParams:
                              ("cabin_heat_capacity_kj_per_k", 0.0, 2000.0),
                              ("battery_warmup_kwh_per_k", 0.0, 1.0),
                              ("battery_heat_below_c", -40.0, 40.0),
+                             ("cabin_soak_time_constant_s", 1.0, 1e6),
+                             ("battery_soak_time_constant_s", 1.0, 1e6),
                              ("cold_traction_loss_per_k", 0.0, 0.05),
                              ("cold_regen_loss_per_k", 0.0, 0.1),
                              ("cold_ref_c", -40.0, 40.0), ("heating_use", 0.0, 10.0),

@@ -18,7 +18,7 @@ from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_ener
 from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import _blocks
 
-__all__ = ["stats_from_logs", "stats_from_traces", "trip_stats"]
+__all__ = ["parked_seconds", "stats_from_logs", "stats_from_traces", "trip_stats"]
 
 
 _SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 cache)
@@ -44,12 +44,13 @@ def _profile_consts(profile, n: int):
 
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
-              start_temperature_c=None, cooling_kw=None, moving_s=None) -> PhysicsStats:
+              start_temperature_c=None, cooling_kw=None, moving_s=None,
+              parked_s=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
     temperatures) and ``start_temperature_c`` (warm-up) default to the values
-    at ``temperature_c``.
+    at ``temperature_c``; ``parked_s`` (per row, NaN: soaked) scales the warm-up.
     """
     n = len(duration_s)
     mult, eta_r, mode_kw = _profile_consts(profile, n)
@@ -63,7 +64,8 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
         t0 = t if start_temperature_c is None else start_temperature_c
-        warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh), (n,)).copy()
+        warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh, parked_s=parked_s),
+                               (n,)).copy()
     kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
     kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
     return PhysicsStats(
@@ -182,7 +184,7 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
 
 
 def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
-                    profile="normal", temperature_c=None) -> PhysicsStats:
+                    profile="normal", temperature_c=None, parked_s=None) -> PhysicsStats:
     """Statistics of logged traces with a per-interval ``dt`` (no resampling).
 
     Interval ``k`` of a trip uses the mean of its two speed samples, the
@@ -200,6 +202,9 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
         degC. With the continuous climate model and a logged temperature, the
         steady climate power is the time mean over the logged per-step
         temperatures.
+    parked_s : float or array_like (n_trips,), s, optional
+        Time parked before each trip (NaN or None: soaked to ambient); scales
+        the warm-up (:func:`hybridev.physics.thermal.soak_fraction`).
 
     Returns
     -------
@@ -229,7 +234,9 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     moving = np.bincount(trip, np.where(vm > 2.0 * MOVING_MPS, dt, 0.0), minlength=n)
     return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
                      climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
-                     moving_s=moving)
+                     moving_s=moving,
+                     parked_s=None if parked_s is None else np.broadcast_to(
+                         np.asarray(parked_s, float), (n,)))
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
@@ -266,7 +273,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     ----------
     trips : pandas.DataFrame
         ``distance_km``, ``avg_speed_kmh``, ``temperature_c``, ``mode``
-        (``None`` allowed), optional ``grade_pct`` and ``trip_id``.
+        (``None`` allowed), optional ``grade_pct``, ``trip_id`` and
+        ``parked_min`` (minutes parked before the trip, NaN: soaked; scales
+        the warm-up).
     vehicle : VehicleParams, optional
     traces : LoggedTraces, optional
     n_steps, seed : int
@@ -356,7 +365,15 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
             duration[dest[blk]] = s.duration_h * 3600.0
             moving[dest[blk]] = s.moving_h * 3600.0
             vmax[dest[blk]] = s.max_speed_kmh
+    parked = parked_seconds(trips)
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
-                    moving_s=moving)
+                    moving_s=moving, parked_s=None if parked is None else parked[trip])
+
+
+def parked_seconds(trips: pd.DataFrame) -> np.ndarray | None:
+    """The ``parked_min`` column in seconds (NaN: soaked), or None without the column."""
+    if "parked_min" not in trips.columns:
+        return None
+    return pd.to_numeric(trips["parked_min"], errors="coerce").to_numpy(float) * 60.0

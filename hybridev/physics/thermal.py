@@ -24,7 +24,11 @@ heater, the pack) has soaked to ambient and must be brought to temperature:
 * warm-up ``E_w = C_cab max(T_b - T, 0) / COP(T) + c_bat max(T_bat - T, 0)``,
   cool-down ``C_cab max(T - T_set, 0) / COP_ac``; each is bounded by the heater's (A/C's) spare
   power over the trip, ``(P_max - P_steady) x duration``, so on a 5-minute
-  winter trip the heater runs flat out and the warm-up dominates.
+  winter trip the heater runs flat out and the warm-up dominates;
+* a car parked for only ``p`` seconds has not soaked: the cabin (pack) terms
+  are scaled by :func:`soak_fraction` ``1 - exp(-p / tau)``, with
+  ``tau = cabin_soak_time_constant_s`` (``battery_soak_time_constant_s``), so
+  the second of two back-to-back trips pays almost no warm-up.
 
 Cold-weather traction and regeneration (:func:`cold_factors`): below
 ``cold_ref_c`` traction energy grows by ``cold_traction_loss_per_k`` per
@@ -47,6 +51,7 @@ __all__ = [
     "cold_factors",
     "heat_pump_cop",
     "heating_balance_c",
+    "soak_fraction",
     "steady_climate_kw",
     "warmup_energy_kwh",
 ]
@@ -159,8 +164,37 @@ def steady_climate_kw(temperature_c, vehicle: VehicleParams | None = None) -> np
     return heat + cool
 
 
-def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | None = None
-                      ) -> np.ndarray:
+def soak_fraction(parked_s, time_constant_s: float) -> np.ndarray:
+    """Share of the fully soaked warm-up that a car parked for ``parked_s`` needs.
+
+    Newton cooling of the cabin (pack) towards ambient while parked:
+    ``1 - exp(-parked_s / time_constant_s)``. A missing (NaN) parking time
+    means "long enough to soak": 1.
+
+    Parameters
+    ----------
+    parked_s : float or array_like, s
+        Time since the previous trip ended, >= 0 or NaN.
+    time_constant_s : float, s
+
+    Returns
+    -------
+    numpy.ndarray, same shape, in [0, 1]
+
+    Examples
+    --------
+    >>> soak_fraction([0.0, 1000.0, np.nan], 1000.0).round(3).tolist()
+    [0.0, 0.632, 1.0]
+    """
+    p = np.asarray(parked_s, dtype=float)
+    if np.any(p < 0) or np.any(np.isinf(p)):
+        raise ValueError(f"parked_s={parked_s!r} is outside the allowed range [0, inf) s "
+                         "(NaN: soaked)")
+    return np.where(np.isnan(p), 1.0, -np.expm1(-np.nan_to_num(p) / float(time_constant_s)))
+
+
+def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | None = None,
+                      parked_s=None) -> np.ndarray:
     """Energy to bring the cabin (and battery) to temperature at the start of a trip, kWh.
 
     Parameters
@@ -171,6 +205,9 @@ def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | 
         Trip duration; bounds the energy to the heater's (A/C's) spare power
         times the duration.
     vehicle : VehicleParams, optional
+    parked_s : float or array_like, s, optional
+        Time parked since the previous trip (NaN or None: soaked to ambient);
+        scales the cabin and pack terms by :func:`soak_fraction`.
 
     Returns
     -------
@@ -183,19 +220,27 @@ def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | 
     [0.406, 0.0]
     >>> float(warmup_energy_kwh(-7.0, 60.0, v).round(3))   # 1 min: heater-limited
     0.047
+    >>> float(warmup_energy_kwh(-7.0, 3600.0, v, parked_s=300.0).round(3))  # 5 min parked
+    0.105
     """
     v = vehicle or VehicleParams(climate_model="continuous")
     t = _temps(start_temperature_c)
     dur_h = np.asarray(duration_s, dtype=float) / 3600.0
     if not np.all(np.isfinite(dur_h) & (dur_h >= 0)):
         raise ValueError(f"duration_s={duration_s!r} is outside the allowed range [0, inf) s")
+    f_cab = f_bat = 1.0
+    if parked_s is not None:
+        f_cab = soak_fraction(parked_s, v.cabin_soak_time_constant_s)
+        f_bat = soak_fraction(parked_s, v.battery_soak_time_constant_s)
     heat_kw, cool_kw = _split_kw(t, v)
     cab = v.cabin_heat_capacity_kj_per_k / 3600.0  # kWh/K
-    warm = np.minimum(cab * np.maximum(heating_balance_c(v) - t, 0.0) / _heating_cop(t, v),
+    warm = np.minimum(f_cab * cab * np.maximum(heating_balance_c(v) - t, 0.0)
+                      / _heating_cop(t, v),
                       np.maximum(v.heater_max_kw - heat_kw, 0.0) * dur_h)  # cap: spare power
-    bat = np.minimum(v.battery_warmup_kwh_per_k * np.maximum(v.battery_heat_below_c - t, 0.0),
+    bat = np.minimum(f_bat * v.battery_warmup_kwh_per_k
+                     * np.maximum(v.battery_heat_below_c - t, 0.0),
                      v.heater_max_kw * dur_h)
-    cool = np.minimum(cab * np.maximum(t - v.t_set_c, 0.0) / v.ac_cop,
+    cool = np.minimum(f_cab * cab * np.maximum(t - v.t_set_c, 0.0) / v.ac_cop,
                       np.maximum(v.ac_max_kw - cool_kw, 0.0) * dur_h)
     return warm + bat + cool
 

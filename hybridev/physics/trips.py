@@ -229,12 +229,14 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     eta_r = (prof["regen_efficiency"] * regen)[:, None]
     aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
     warm = veh.climate_model == "continuous"
+    parked = cols["parked_min"] * 60.0 if "parked_min" in cols else None
     for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
         energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
         if warm:
-            energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh)
+            energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh,
+                                            parked_s=None if parked is None else parked[sl])
         if veh.drive_loss_kw:
             energy[sl] += veh.drive_loss_kw * _moving_steps(v)[:, 0] * dt / 3600.0
         vmax[sl] = v.max(axis=1) * 3.6

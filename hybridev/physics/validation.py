@@ -27,7 +27,7 @@ __all__ = [
 REQUIRED_TRIP_COLUMNS = ("distance_km", "avg_speed_kmh", "mode", "temperature_c", "soc_initial")
 """Columns every trip table must have."""
 
-OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id")
+OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id", "parked_min")
 """Columns a trip table may have."""
 
 
@@ -41,14 +41,21 @@ class FieldRule:
     hi_open: bool = False
     hint: str = ""
     """Likely cause of a bad value, appended to the message (e.g. a unit mix-up)."""
+    missing_ok: bool = False
+    """An empty cell (NaN/None) is allowed and means "unknown"; text is still refused."""
 
     def describe(self) -> str:
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+        rng = f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+        return rng + (" or empty" if self.missing_ok else "")
 
-    def bad_mask(self, x: np.ndarray) -> np.ndarray:
+    def bad_mask(self, x: np.ndarray, missing: np.ndarray | None = None) -> np.ndarray:
+        """Rows outside the range; ``missing`` marks empty raw cells (allowed if ``missing_ok``)."""
         lo_ok = x > self.lo if self.lo_open else x >= self.lo
         hi_ok = x < self.hi if self.hi_open else x <= self.hi
-        return ~(np.isfinite(x) & lo_ok & hi_ok)
+        bad = ~(np.isfinite(x) & lo_ok & hi_ok)
+        if self.missing_ok and missing is not None:
+            bad &= ~missing
+        return bad
 
 
 TRIP_RULES: dict[str, FieldRule] = {
@@ -58,6 +65,9 @@ TRIP_RULES: dict[str, FieldRule] = {
     "soc_initial": FieldRule(0.0, 1.0, hint="a fraction; a SoC in percent divides by 100"),
     "hour": FieldRule(0.0, 24.0, hi_open=True),
     "grade_pct": FieldRule(-30.0, 30.0),
+    "parked_min": FieldRule(0.0, 1e7, missing_ok=True,
+                            hint="minutes parked since the previous trip ended; empty: "
+                                 "unknown, taken as soaked to ambient"),
 }
 
 
@@ -167,7 +177,8 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
             continue
         raw = out[field]
         x = _numeric(raw, field, what)
-        report(field, rule.bad_mask(x), lambda raw=raw: raw.to_numpy(dtype=object),
+        miss = raw.isna().to_numpy() if rule.missing_ok else None
+        report(field, rule.bad_mask(x, miss), lambda raw=raw: raw.to_numpy(dtype=object),
                rule.describe() + (f" ({rule.hint})" if rule.hint else ""))
         if raw.dtype != np.float64:  # float64 columns are kept as they are
             conv[field] = x
@@ -215,7 +226,11 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     Required columns: ``distance_km`` (0, 2000], ``avg_speed_kmh`` (0, 250],
     ``mode`` (a key of :data:`hybridev.PROFILES`), ``temperature_c``
     [-50, 60] and ``soc_initial`` [0, 1]. Optional: ``hour`` [0, 24),
-    ``grade_pct`` [-30, 30], ``trip_id``.
+    ``grade_pct`` [-30, 30], ``trip_id``, ``parked_min`` [0, 1e7] or empty
+    (minutes the car stood parked since its previous trip ended: a short stop
+    leaves the cabin warm, :func:`hybridev.physics.thermal.soak_fraction`;
+    empty means unknown, taken as soaked to ambient; see
+    :func:`hybridev.parked_minutes` to derive it from start times).
 
     Parameters
     ----------

@@ -125,3 +125,16 @@ def test_coarse_sampling_warns_with_one_text_for_every_partition(fitted):
     assert len(texts) == 1
     assert next(iter(texts)).startswith("timeseries: in some partitions the samples are more "
                                         "than 2 s apart (median): between samples")
+
+
+def test_start_times_need_a_parked_min_column_on_dask(client, fitted):
+    """Parking time needs the previous trip, which may sit in another partition."""
+    trips = _trips(12).assign(start_time=pd.date_range("2024-01-05 07:00", periods=12,
+                                                      freq="40min"))
+    with pytest.raises(ValueError, match="parked_min"):
+        fitted.predict(dd.from_pandas(trips, npartitions=2))
+    from hybridev import parked_minutes
+
+    ready = trips.assign(parked_min=parked_minutes(trips))
+    _same(fitted.predict(dd.from_pandas(ready, npartitions=3)).compute(),
+          fitted.predict(trips))  # pandas derives the same column itself

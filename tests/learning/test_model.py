@@ -535,3 +535,30 @@ def test_fit_warns_when_a_posterior_median_leaves_its_prior(small):
         m = HybridModel(**kw).fit(small, seed=0)
     assert m.posterior_.prior_check()["inside"].all()
     assert not [w for w in rec if "physics posterior" in str(w.message)]
+
+
+def test_start_times_give_parking_time_at_fit_and_predict(monkeypatch):
+    """A start_time column derives parked_min (warm cabins after short stops) at fit and predict."""
+    from hybridev import VehicleParams, parked_minutes
+    from hybridev.learning import model as model_mod
+
+    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+    t = make_trips(24, seed=9).assign(temperature_c=-8.0)
+    t["start_time"] = pd.Timestamp("2025-01-06 07:00") + pd.to_timedelta(
+        np.arange(24) * 50, unit="min")
+    truth = simulate(t.assign(parked_min=parked_minutes(t)), v, n_steps=N_STEPS)
+    t["energy_kwh"] = truth["energy_kwh_physics"]
+    seen = []
+    real = model_mod.validate_measured_trips
+    monkeypatch.setattr(model_mod, "validate_measured_trips",
+                        lambda table, *a, **k: (seen.append(list(table.columns)),
+                                                real(table, *a, **k))[1])
+    m = HybridModel(**PAPER, vehicle=v, n_steps=N_STEPS, max_epochs=2).fit(t, seed=0)
+    assert "parked_min" in seen[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = m.predict(t.drop(columns="energy_kwh"))
+        soaked = m.predict(t.drop(columns=["energy_kwh", "start_time"]))
+    np.testing.assert_allclose(p["energy_kwh_physics"], truth["energy_kwh_physics"], rtol=1e-12)
+    gain = soaked["energy_kwh_physics"].to_numpy() - p["energy_kwh_physics"].to_numpy()
+    assert (gain >= 0).all() and (gain > 0.01).sum() >= 10

@@ -16,6 +16,7 @@ from hybridev.physics.thermal import (
     cold_factors,
     heat_pump_cop,
     heating_balance_c,
+    soak_fraction,
     steady_climate_kw,
     warmup_energy_kwh,
 )
@@ -172,3 +173,46 @@ def test_battery_warmup_reaches_the_trip_energy_once_per_trip():
         diff = (trace_energy_kwh(speed, 1.0, vehicle=bat, temperature_c=[-15.0])
                 - trace_energy_kwh(speed, 1.0, vehicle=v, temperature_c=[-15.0]))
         assert float(diff[0]) == pytest.approx(kwh, rel=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.0, 1e6), st.floats(0.0, 1e6), st.floats(1.0, 1e5))
+def test_soak_fraction_rises_from_0_to_1_with_parking_time(p1, p2, tau):
+    lo, hi = sorted((p1, p2))
+    f_lo, f_hi = soak_fraction([lo, hi], tau)
+    assert 0.0 <= f_lo <= f_hi <= 1.0
+    assert soak_fraction(0.0, tau) == 0.0 and soak_fraction(np.nan, tau) == 1.0
+
+
+@pytest.mark.parametrize("bad", [-1.0, np.inf])
+def test_soak_fraction_refuses_negative_or_infinite_times(bad):
+    with pytest.raises(ValueError, match="parked_s"):
+        soak_fraction(bad, 1000.0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(temps, st.floats(0.0, 1e5), st.floats(60.0, 7200.0))
+def test_a_short_stop_never_needs_more_warmup_than_a_soaked_start(t, parked_s, dur_s):
+    v = dataclasses.replace(CONT, battery_warmup_kwh_per_k=0.1)
+    soaked = warmup_energy_kwh(t, dur_s, v)
+    short = warmup_energy_kwh(t, dur_s, v, parked_s=parked_s)
+    assert 0.0 <= short <= soaked + 1e-12
+    assert warmup_energy_kwh(t, dur_s, v, parked_s=np.nan) == soaked
+    # the cabin relaxes with its time constant: one tau of parking pays ~63 %
+    cab = warmup_energy_kwh(t, 1e6, CONT, parked_s=CONT.cabin_soak_time_constant_s)
+    assert cab == pytest.approx((1 - np.exp(-1)) * warmup_energy_kwh(t, 1e6, CONT), rel=1e-9)
+
+
+def test_parked_min_lowers_winter_energy_and_stats_stay_exact():
+    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+    trips = make_trips(40, seed=3).assign(temperature_c=np.linspace(-20.0, 40.0, 40))
+    parked = trips.assign(parked_min=np.r_[np.full(20, 2.0), np.full(20, np.nan)])
+    soaked = simulate(trips, v).energy_kwh_physics.to_numpy()
+    warm = simulate(parked, v).energy_kwh_physics.to_numpy()
+    need = warmup_energy_kwh(trips.temperature_c.to_numpy()[:20], 1e6, v) > 0
+    assert (warm[:20][need] < soaked[:20][need]).all()
+    assert np.array_equal(warm[20:], soaked[20:])  # NaN: soaked
+    s = trip_stats(parked, v)
+    assert np.allclose(energy_from_stats(s), warm, rtol=1e-9)
+    # the paper preset has no warm-up: parking time changes nothing
+    assert np.array_equal(simulate(parked).energy_kwh_physics, simulate(trips).energy_kwh_physics)

@@ -1,0 +1,83 @@
+"""Minutes parked before each trip, from the log's start times (hybridev.data.parked)."""
+
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev import VehicleParams, make_trips, parked_minutes, simulate
+from hybridev.core.errors import DataWarning
+from hybridev.data.logs import measured_from_frames
+from hybridev.data.parked import with_parked_minutes
+from hybridev.physics.validation import validate_trips
+
+
+def test_gaps_follow_start_order_per_vehicle_and_clip_at_zero():
+    t = pd.DataFrame({
+        "vehicle_id": ["b", "a", "a", "a", "b"],
+        "start_time": ["2024-01-05 09:00", "2024-01-05 08:30", "2024-01-05 08:00",
+                       "2024-01-05 12:00", "2024-01-05 09:20"],
+        "duration_s": [600.0, 1800.0, 1500.0, 600.0, 600.0]})
+    p = parked_minutes(t)
+    # a: 08:00-08:25, 08:30-09:00, 12:00; b: 09:00-09:10, 09:20
+    assert p.iloc[1] == 5.0 and np.isnan(p.iloc[2]) and p.iloc[3] == 180.0
+    assert np.isnan(p.iloc[0]) and p.iloc[4] == 10.0
+    # a logged clock that starts a trip before the previous one ended: back to back
+    t2 = pd.DataFrame({"start_time": ["2024-01-05 08:00", "2024-01-05 08:10"],
+                       "duration_s": [1200.0, 600.0]})
+    assert parked_minutes(t2).iloc[1] == 0.0
+
+
+def test_end_from_distance_and_speed_without_duration():
+    t = pd.DataFrame({"start_time": pd.to_datetime(["2024-01-05 08:00", "2024-01-05 09:00"]),
+                      "distance_km": [30.0, 5.0], "avg_speed_kmh": [60.0, 30.0]})
+    assert parked_minutes(t).iloc[1] == 30.0
+
+
+def test_no_start_time_derives_nothing_and_date_hour_are_not_used():
+    t = make_trips(5, seed=0).assign(date="2024-01-05")  # 'hour' is a random feature here
+    assert parked_minutes(t) is None
+    assert with_parked_minutes(t) is t
+
+
+def test_a_given_parked_min_is_kept():
+    t = pd.DataFrame({"start_time": ["2024-01-05 08:00", "2024-01-05 09:00"],
+                      "duration_s": [60.0, 60.0], "parked_min": [np.nan, 500.0]})
+    assert with_parked_minutes(t) is t
+
+
+def test_unreadable_start_times_warn_with_count_and_stay_unknown():
+    t = pd.DataFrame({"start_time": ["2024-01-05 08:00", "yesterday-ish", "2024-01-05 09:00"],
+                      "duration_s": [600.0, 600.0, 600.0]})
+    with pytest.warns(DataWarning, match="1 trip"):
+        p = parked_minutes(t)
+    assert np.isnan(p.iloc[1]) and p.iloc[2] == 50.0
+
+
+def test_validation_allows_empty_but_not_negative_or_text():
+    base = make_trips(3, seed=1)
+    assert len(validate_trips(base.assign(parked_min=[np.nan, 0.0, 30.0]))) == 3
+    with pytest.raises(ValueError, match=r"parked_min.*-5.*\[0, 1e\+07\] or empty"):
+        validate_trips(base.assign(parked_min=[-5.0, 0.0, 1.0]))
+    with pytest.raises(ValueError, match="parked_min"):
+        validate_trips(base.assign(parked_min=["soon", 0.0, 1.0]))
+
+
+def test_measured_from_frames_derives_parking_time_from_trace_durations():
+    trips = pd.DataFrame({"trip_id": ["a", "b"], "temperature_c": [-5.0, -5.0],
+                          "soc_initial": [0.8, 0.7], "energy_kwh": [1.0, 0.5],
+                          "start_time": ["2024-01-05 08:00:00", "2024-01-05 08:15:00"]})
+    ts = pd.DataFrame({"trip_id": ["a"] * 601 + ["b"] * 301,
+                       "t_s": list(range(601)) + list(range(301)),
+                       "speed_kmh": [40.0] * 902})
+    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = measured_from_frames(trips, ts, v)
+    assert np.isnan(m.trips["parked_min"].iloc[0]) and m.trips["parked_min"].iloc[1] == 5.0
+    # the second trip starts with a warm cabin: less physics energy than soaked
+    e = simulate(m.trips.assign(mode="normal"), v).energy_kwh_physics.to_numpy()
+    e0 = simulate(m.trips.drop(columns="parked_min").assign(mode="normal"),
+                  v).energy_kwh_physics.to_numpy()
+    assert e[0] == e0[0] and e[1] < e0[1]
