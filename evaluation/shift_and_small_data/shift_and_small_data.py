@@ -172,7 +172,8 @@ def load_m1(root: Path):
         "trip_id": src["trip_id"].astype(str), "distance_km": src["distance_km"],
         "avg_speed_kmh": src["mean_speed_kmh"], "temperature_c": src["amb_temp_mean_c"],
         "energy_kwh": src["e_batt_net_kwh"],
-        "soc_initial": 0.8})  # no SoC in the source; energy is the target
+        "soc_initial": 0.8,  # no SoC in the source; energy is the target
+        "start_time": src["start_time_local"]})  # minutes parked before each trip
     ts = pd.read_parquet(root / "timeseries_1hz.parquet",
                          columns=["trip_id", "t_s", "speed_kmh", "elevation_m", "amb_temp_c"])
     ts["trip_id"] = ts["trip_id"].astype(str)

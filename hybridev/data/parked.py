@@ -44,6 +44,11 @@ def _starts(trips: pd.DataFrame) -> pd.Series | None:
     if START_COLUMN not in trips.columns:
         return None
     raw = trips[START_COLUMN]
+    if pd.api.types.is_numeric_dtype(raw) and not pd.api.types.is_bool_dtype(raw):
+        first = raw.dropna().iloc[0] if raw.notna().any() else raw.iloc[0]
+        raise ValueError(f"trips: column 'start_time' holds numbers (first {first!r}); allowed: "
+                         "a date and time (text such as '2024-01-05 08:00' or datetime "
+                         "values); epoch seconds convert with pandas.to_datetime(x, unit='s')")
     if pd.api.types.is_datetime64_any_dtype(raw):
         return raw.dt.tz_localize(None) if getattr(raw.dt, "tz", None) is not None else raw
     out = pd.to_datetime(raw.astype(object), errors="coerce", format="mixed", utc=True)

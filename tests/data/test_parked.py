@@ -81,3 +81,9 @@ def test_measured_from_frames_derives_parking_time_from_trace_durations():
     e0 = simulate(m.trips.drop(columns="parked_min").assign(mode="normal"),
                   v).energy_kwh_physics.to_numpy()
     assert e[0] == e0[0] and e[1] < e0[1]
+
+
+def test_numeric_start_times_are_refused_with_the_conversion():
+    t = pd.DataFrame({"start_time": [1.7e9, 1.7e9 + 3600.0], "duration_s": [600.0, 600.0]})
+    with pytest.raises(ValueError, match=r"start_time.*numbers.*unit='s'"):
+        parked_minutes(t)
