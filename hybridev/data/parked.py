@@ -10,19 +10,23 @@ with timestamps needs nothing more.
 Start of a trip: the ``start_time`` column (datetime, or text that
 :func:`pandas.to_datetime` reads; local time). ``date`` and ``hour`` are not
 used: tables often carry a ``date`` that is only a group label and an ``hour``
-that is a feature (:func:`hybridev.make_trips` draws it at random). Its end: the start plus ``duration_s`` when the table has it, else
-plus the logged trace's duration, else plus ``distance_km / avg_speed_kmh``.
+that is a feature (:func:`hybridev.make_trips` draws it at random). Its end:
+the start plus ``duration_s`` when the table has it, else plus the logged
+trace's duration, else plus ``distance_km / avg_speed_kmh``.
 Trips are ordered by start per ``vehicle_id`` (when the table has one), and
 ``parked_min`` is the start minus the previous trip's end, clipped at 0
 (logged clocks drift: a start a few minutes before the previous end means back
 to back). The first trip of each vehicle, and a trip without a readable start,
 get NaN (unknown: taken as soaked).
 
-The derivation needs the whole log of a car, so it runs where a log is read
-(:func:`hybridev.read_measured_trips`, :func:`hybridev.data.logs.measured_from_frames`),
-or by hand with :func:`parked_minutes`; :meth:`hybridev.HybridModel.predict`
-uses a ``parked_min`` column as given and derives nothing (a trip's prediction
-never depends on the other rows of the table).
+The derivation needs the trips before each trip, so it runs on whole tables:
+where a log is read (:func:`hybridev.read_measured_trips`,
+:func:`hybridev.data.logs.measured_from_frames`), in ``HybridModel.fit``,
+``calibrate_physics`` and the pandas ``predict*`` methods (on the rows they are
+given), or by hand with :func:`parked_minutes`. A given ``parked_min`` is never
+replaced. A dask frame may split a car's log across partitions, so there a
+``start_time`` column needs ``parked_min`` derived first
+(:mod:`hybridev.fleet.scoring` says so).
 """
 
 from __future__ import annotations
@@ -61,8 +65,8 @@ def parked_minutes(trips: pd.DataFrame, duration_s=None) -> pd.Series | None:
     Parameters
     ----------
     trips : pandas.DataFrame
-        With ``start_time``; optional ``duration_s`` (s), ``distance_km`` and ``avg_speed_kmh`` (for the
-        end of a trip), ``vehicle_id``.
+        With ``start_time``; optional ``duration_s`` (s), ``distance_km`` and
+        ``avg_speed_kmh`` (for the end of a trip), ``vehicle_id``.
     duration_s : array_like, shape (n_trips,), s, optional
         Trip durations (e.g. of the logged traces; NaN: unknown), used where
         the table has no ``duration_s`` column.
