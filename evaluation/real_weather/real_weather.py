@@ -188,7 +188,7 @@ def cross_validate(m: MeasuredTrips, extra: pd.DataFrame, vehicle: VehicleParams
 
 
 def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) -> dict:
-    """MAPE, bias, bias by temperature band and duration, residual trend vs temperature."""
+    """MAPE, bias, bias by temperature band, duration and parking time, residual trends."""
     from scipy.stats import linregress
 
     temp = trips["temperature_c"].to_numpy(float)
@@ -197,6 +197,12 @@ def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) 
                     labels=["< 15 °C", "15-20 °C", "20-25 °C", ">= 25 °C"])
     d_band = pd.cut(dur_min, [0, 15, 30, 45, np.inf],
                     labels=["< 15 min", "15-30 min", "30-45 min", ">= 45 min"])
+    parked = (trips["parked_min"].to_numpy(float) if "parked_min" in trips.columns
+              else np.full(len(y), np.nan))
+    p_band = pd.Categorical(np.where(np.isnan(parked), "unknown (first or no start time)",
+                                     np.where(parked < 30.0, "< 30 min", ">= 30 min")),
+                            categories=["< 30 min", ">= 30 min",
+                                        "unknown (first or no start time)"])
     out = {}
     for k, p in pred.items():
         r = p / y - 1.0
@@ -208,12 +214,15 @@ def scores(y: np.ndarray, pred: dict, trips: pd.DataFrame, extra: pd.DataFrame) 
                                         for b in t_band.categories if (t_band == b).any()},
             "bias_by_duration_pct": {str(b): float(r[d_band == b].mean() * 100)
                                      for b in d_band.categories if (d_band == b).any()},
+            "bias_by_parking_pct": {str(b): float(r[p_band == b].mean() * 100)
+                                    for b in p_band.categories if (p_band == b).any()},
             "trend_vs_temperature_pct_per_k": float(fit.slope * 100),
             "trend_p_value": float(fit.pvalue),
             "trend_vs_duration_pct_per_10min": float(linregress(dur_min, r).slope * 1000),
         }
     counts = {"temperature": {str(b): int((t_band == b).sum()) for b in t_band.categories},
-              "duration": {str(b): int((d_band == b).sum()) for b in d_band.categories}}
+              "duration": {str(b): int((d_band == b).sum()) for b in d_band.categories},
+              "parking": {str(b): int((p_band == b).sum()) for b in p_band.categories}}
     return {"by_method": out, "counts": counts}
 
 

@@ -132,6 +132,8 @@ def write(out: Path, result: dict, cv: dict, m, extra, post) -> None:
                                             for k in keys] for b in cnt["temperature"]]
     d_rows = [[b, cnt["duration"][b]] + [f"{sc[k]['bias_by_duration_pct'].get(b, np.nan):+.1f}"
                                          for k in keys] for b in cnt["duration"]]
+    park_rows = [[b, cnt["parking"][b]] + [f"{sc[k]['bias_by_parking_pct'].get(b, np.nan):+.1f}"
+                                        for k in keys] for b in cnt.get("parking", {})]
     hdr = ["n trips"] + [LABELS[k] for k in keys]
     pc = post.prior_check()
     summ = post.summary(0.9)
@@ -228,6 +230,14 @@ speed², duration x |T - 21 °C| and elevation gain/loss.
 ### Bias by trip duration (%, held out)
 
 {_md_table(["duration", *hdr], d_rows)}
+
+### Bias by parking time before the trip (%, held out)
+
+Minutes since the previous trip ended (`parked_min`, from the start times); a cabin
+parked for less than 30 min is still partly warm (cool), and the physics pays only
+`1 - exp(-parked / 1000 s)` of its warm-up.
+
+{_md_table(["parked", *hdr], park_rows)}
 
 ![residuals](figures/rw_residuals.png)
 
