@@ -21,16 +21,20 @@ _OFFSET = r"\s*(?:Z|UTC|[+-]\d{2}:?\d{2})$"  # a trailing UTC offset of a date-t
 
 __all__ = ["AUTO_GROUP_COLUMNS", "auto_group_column", "auto_group_labels", "group_labels"]
 
-AUTO_GROUP_COLUMNS = ("date", "session_group")
+AUTO_GROUP_COLUMNS = ("date", "session_group", "start_time")
 """Columns ``groups="auto"`` looks for, in this order (trips of one day or session
 share weather, traffic and driver, so their errors are correlated); also used by
-:func:`hybridev.learning.splits.group_codes`."""
+:func:`hybridev.learning.splits.group_codes`. ``start_time`` groups by its
+calendar day, for a log that gives start times but no date."""
+
+_DAY_COLUMNS = ("date", "start_time")
+"""Columns cut to their calendar day by :func:`group_labels`."""
 
 
 def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
-    """Group label per trip from a column; a ``date`` column at day resolution.
+    """Group label per trip from a column; a ``date`` (``start_time``) column at day resolution.
 
-    Timestamps in ``date`` are cut to their calendar day, so that trips of one
+    Timestamps in ``date`` (and ``start_time``) are cut to their calendar day, so that trips of one
     day share a group: a datetime column (time-zone aware or not, the day in
     its own zone), strings that all parse as dates or date-times (e.g.
     ``2024-01-05 08:13``; with UTC offsets, which change with daylight saving
@@ -51,7 +55,7 @@ def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
     ['2024-07-01', '2024-12-01']
     """
     labels = trips[column]
-    if column != "date":
+    if column not in _DAY_COLUMNS:
         return labels
     if pd.api.types.is_datetime64_any_dtype(labels):
         return labels.dt.normalize()
@@ -62,10 +66,16 @@ def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
             return pd.to_datetime(labels, unit="s", utc=True).dt.normalize()
         return labels
     if labels.dtype == object or pd.api.types.is_string_dtype(labels):
+        dayfirst = False
+        if column == "start_time":  # numeric dates in the order the column proves
+            from hybridev.data.parked import _day_first
+
+            dayfirst = _day_first(labels.dropna().astype(str))
         for text in (labels, labels.astype(object).where(labels.isna(), labels.astype(str)
                                                           .str.replace(_OFFSET, "", regex=True))):
             try:
-                parsed = pd.to_datetime(text, errors="coerce", format="mixed")
+                parsed = pd.to_datetime(text, errors="coerce", format="mixed",
+                                        dayfirst=dayfirst)
             except (TypeError, ValueError, OverflowError):
                 continue  # e.g. mixed UTC offsets: try again without them
             if (pd.api.types.is_datetime64_any_dtype(parsed)
@@ -73,7 +83,7 @@ def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
                 return parsed.dt.normalize()
     n = int(labels.notna().sum())
     if n > 2 and labels.nunique(dropna=True) == n:
-        warnings.warn(f"date: its {n} values could not be read as dates (e.g. "
+        warnings.warn(f"{column}: its {n} values could not be read as dates (e.g. "
                       f"{labels.dropna().iloc[0]!r}) and are all different, so every trip is "
                       "its own group and trips of one day are not kept together; give dates "
                       "as YYYY-MM-DD (or date-times), or name a day or session column",

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 
 import emcee
 import numpy as np
@@ -124,7 +125,9 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         Measured-trip table (``energy_kwh`` and/or ``soc_final``; ``mode`` may
         be missing) or the result of :func:`hybridev.data.logs.read_measured_trips`.
     vehicle : VehicleParams, optional
-        Nominal vehicle: prior centres and all parameters not sampled. A
+        Nominal vehicle: prior centres and all parameters not sampled. Default:
+        the vehicle a ``MeasuredTrips`` was read for, else the paper's (a
+        different explicit one warns). A
         ``heater_kind="auto"`` (the default of ``from_coastdown``) is first
         resolved from the trips (:func:`hybridev.bayes.heater.select_heater_kind`;
         the outcome is in ``diagnostics["heater"]``) and the posterior's
@@ -197,6 +200,15 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     (1, True)
     """
     seed = check_seed(seed)
+    read_for = measured_trips.vehicle if isinstance(measured_trips, MeasuredTrips) else None
+    if vehicle is None:
+        vehicle = read_for  # the car the trips were read for (read_measured_trips(vehicle=))
+    elif read_for is not None and read_for != vehicle:
+        warnings.warn(f"the measured trips were read for another vehicle (battery "
+                      f"{read_for.battery_capacity_kwh:g} kWh, mass {read_for.mass_kg:g} kg) "
+                      f"than the vehicle= given here (battery {vehicle.battery_capacity_kwh:g} "
+                      f"kWh, mass {vehicle.mass_kg:g} kg); the given one is calibrated",
+                      UserWarning, stacklevel=2)
     veh = vehicle or VehicleParams()
     pr = prior or PhysicsPrior()
     names = tuple(params)

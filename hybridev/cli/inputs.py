@@ -50,7 +50,9 @@ def add_vehicle_arguments(p: argparse.ArgumentParser) -> None:
 def add_input_arguments(p: argparse.ArgumentParser, *, timeseries: bool = True) -> None:
     p.add_argument("--columns", default=None, metavar="OLD=NEW,...",
                    help="rename your logger's columns to the contract first, e.g. "
-                        "mean_speed_kmh=avg_speed_kmh,e_batt_net_kwh=energy_kwh")
+                        "mean_speed_kmh=avg_speed_kmh,e_batt_net_kwh=energy_kwh; map the "
+                        "trip start (date and time, year first) to start_time so that "
+                        "trips after a short stop start with a warm cabin (parked_min)")
     p.add_argument("--columns-file", default=None, metavar="FILE",
                    help="the same mapping as a .csv with columns old,new")
     p.add_argument("--soc-initial", type=float, default=None, metavar="S",

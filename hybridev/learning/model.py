@@ -555,7 +555,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             stopping, split-conformal calibration, CV+ folds) keeps whole
             groups together (:mod:`hybridev.learning.splits`). ``"auto"``
             (default): the trips' ``date`` column, else ``session_group``,
-            else none, as the physics calibration does; ``None``: every trip
+            else the calendar day of ``start_time``, else none, as the physics
+            calibration does; ``None``: every trip
             its own group.
         progress : callable, optional
             Called with the number of finished epochs.

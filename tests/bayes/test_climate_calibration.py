@@ -144,3 +144,32 @@ def test_prior_check_flags_a_parameter_pressed_against_its_hard_bound():
     assert chk.loc["regen_scale", "bound"] == pytest.approx(top)
     assert not chk.loc["drivetrain_efficiency", "at_bound"]
     assert np.isnan(chk.loc["drivetrain_efficiency", "bound"])
+
+
+def test_measured_trips_bring_their_vehicle():
+    """calibrate_physics(MeasuredTrips) calibrates the car the trips were read for; another
+    explicit vehicle warns."""
+    from hybridev.data.logs import MeasuredTrips
+
+    m = simulate_measured(_trips(30, 4), CAR, noise_rel=0.03, seed=5)
+    read = MeasuredTrips(m, None, m.iloc[:0], CAR)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        post = calibrate_physics(read, params=("aux_base_kw",), n_steps=200, groups=None)
+    assert post.reference_vehicle.mass_kg == CAR.mass_kg
+    assert post.reference_vehicle.climate_model == "continuous"
+    with pytest.warns(UserWarning, match="read for another vehicle"):
+        calibrate_physics(read, VehicleParams(), params=("aux_base_kw",), n_steps=50,
+                          groups=None)
+
+
+def test_auto_groups_fall_back_to_the_day_of_start_time():
+    import pandas as pd
+
+    from hybridev.bayes.groups import auto_group_column, auto_group_labels
+
+    t = pd.DataFrame({"start_time": ["13/01/2025 07:00", "13/01/2025 18:00", "06/02/2025 07:00"]})
+    assert auto_group_column(t) == "start_time"
+    assert auto_group_labels(t).astype(str).tolist() == ["2025-01-13", "2025-01-13",
+                                                         "2025-02-06"]  # day first
+    assert auto_group_column(t.assign(date=["a", "a", "b"])) == "date"

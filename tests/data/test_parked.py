@@ -9,7 +9,7 @@ import pytest
 from hybridev import VehicleParams, make_trips, parked_minutes, simulate
 from hybridev.core.errors import DataWarning
 from hybridev.data.logs import measured_from_frames
-from hybridev.data.parked import with_parked_minutes
+from hybridev.data.parked import MAX_PARKED_MIN, with_parked_minutes
 from hybridev.physics.validation import validate_trips
 
 
@@ -50,7 +50,7 @@ def test_a_given_parked_min_is_kept():
 def test_unreadable_start_times_warn_with_count_and_stay_unknown():
     t = pd.DataFrame({"start_time": ["2024-01-05 08:00", "yesterday-ish", "2024-01-05 09:00"],
                       "duration_s": [600.0, 600.0, 600.0]})
-    with pytest.warns(DataWarning, match="1 trip"):
+    with pytest.warns(DataWarning, match=r"start_time: 1 trip.*'yesterday-ish'"):
         p = parked_minutes(t)
     assert np.isnan(p.iloc[1]) and p.iloc[2] == 50.0
 
@@ -83,7 +83,58 @@ def test_measured_from_frames_derives_parking_time_from_trace_durations():
     assert e[0] == e0[0] and e[1] < e0[1]
 
 
-def test_numeric_start_times_are_refused_with_the_conversion():
-    t = pd.DataFrame({"start_time": [1.7e9, 1.7e9 + 3600.0], "duration_s": [600.0, 600.0]})
-    with pytest.raises(ValueError, match=r"start_time.*numbers.*unit='s'"):
+def _t(starts, dur=600.0, **cols):
+    return pd.DataFrame({"start_time": starts, "duration_s": dur, **cols})
+
+
+@pytest.mark.parametrize("starts, what", [
+    ([1.7e9, 1.7e9 + 3600.0], r"numbers.*first 1700000000.0\)"),
+    ([True, False], "true/false"),
+    (["07:00", "07:35"], "time of day without a date"),
+    (["06/01/2025 07:00", "07/01/2025 07:00"], "cannot be told apart"),
+    (["13/01/2025 07:00", "01/13/2025 07:00"], "mixes day-first and month-first"),
+])
+def test_start_times_that_cannot_be_read_safely_are_refused(starts, what):
+    with pytest.raises(ValueError, match=rf"'start_time' .*{what}.*allowed: a date and a time"):
+        parked_minutes(_t(starts))
+
+
+def test_numeric_dates_follow_the_order_the_column_proves():
+    day_first = parked_minutes(_t(["13/01/2025 07:00", "13/01/2025 07:40", "19/01/2025 07:00"]))
+    assert np.isnan(day_first.iloc[0]) and day_first.iloc[1] == 30.0
+    assert day_first.iloc[2] == 6 * 1440 - 50  # 19 January, not a month later
+    month_first = parked_minutes(_t(["01/13/2025 07:00", "01/13/2025 07:40"]))
+    assert month_first.iloc[1] == 30.0
+
+
+def test_time_zones_compare_moments_in_utc():
+    naive = parked_minutes(_t(["2025-03-30 01:50", "2025-03-30 02:05"], dur=300.0))
+    aware = pd.Series(pd.to_datetime(["2025-03-30 01:50", "2025-03-30 03:05"])).dt.tz_localize(
+        "Europe/Berlin")  # the spring change: 01:55 +01 -> 03:05 +02 is 10 min
+    assert naive.iloc[1] == 10.0
+    assert parked_minutes(_t(aware, dur=300.0)).iloc[1] == 10.0
+    offsets = parked_minutes(_t(["2025-10-26T02:30:00+02:00", "2025-10-26T02:05:00+01:00"]))
+    assert np.isnan(offsets.iloc[0]) and offsets.iloc[1] == 25.0  # in order of the moments
+    with pytest.warns(DataWarning, match="some values carry a UTC offset"):
+        parked_minutes(_t(["2025-01-06T07:00:00+01:00", "2025-01-06 07:30:00"]))
+
+
+def test_empty_or_date_only_start_times_are_not_used():
+    assert parked_minutes(_t([np.nan, np.nan])) is None
+    with pytest.warns(DataWarning, match="every value is at midnight"):
+        assert parked_minutes(_t(["2025-01-06", "2025-01-06", "2025-01-07"])) is None
+
+
+def test_overlaps_warn_and_gaps_are_capped_at_a_week():
+    with pytest.warns(DataWarning, match="1 trip.*before the previous trip.*vehicle_id"):
+        p = parked_minutes(_t(["2025-01-06 07:00", "2025-01-06 07:05"], dur=3600.0))
+    assert p.iloc[1] == 0.0
+    reset = parked_minutes(_t(["2000-01-01 00:00", "2025-01-06 07:00"]))
+    assert reset.iloc[1] == MAX_PARKED_MIN
+
+
+def test_durations_in_minutes_warn():
+    t = _t(["2025-01-06 07:00", "2025-01-06 09:00"], dur=[30.0, 20.0],
+           distance_km=[20.0, 10.0], avg_speed_kmh=[40.0, 30.0])
+    with pytest.warns(DataWarning, match="duration_s.*minutes or hours"):
         parked_minutes(t)

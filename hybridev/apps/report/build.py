@@ -148,7 +148,8 @@ def split_trips(trips: pd.DataFrame, test_fraction: float = 0.2, *, seed: int = 
     """Boolean test mask: whole groups held out when ``group_column`` exists, else random.
 
     ``"auto"`` (default) holds out whole days (``date``, timestamps cut to the
-    calendar day), else whole ``session_group`` values, as ``fit(groups="auto")``
+    calendar day), else whole ``session_group`` values, else the days of
+    ``start_time``, as ``fit(groups="auto")``
     (:func:`hybridev.bayes.groups.auto_group_column`); a ``date`` column named
     explicitly is cut to days too.
 
@@ -378,8 +379,8 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
         Share of groups (or trips) held out.
     group_column : str or None
         Column of whole groups to hold out (ignored when absent); ``"auto"``
-        (default): ``date`` by calendar day, else ``session_group``, else a
-        random split (:func:`split_trips`).
+        (default): ``date`` by calendar day, else ``session_group``, else the
+        day of ``start_time``, else a random split (:func:`split_trips`).
     physics_params, physics_missing_mode, model_params, calibrate_kwargs
         See :func:`holdout_evaluation`.
     quiet : bool

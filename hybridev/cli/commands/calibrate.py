@@ -33,8 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="share of groups (or trips) held out for scoring (default 0.2)")
     p.add_argument("--group-column", default="auto",
                    help="hold out whole groups of this column when present; a date column "
-                        "by calendar day (default auto: date, else session_group, else a "
-                        "random split)")
+                        "by calendar day (default auto: date, else session_group, else the "
+                        "day of start_time, else a random split)")
     p.add_argument("--save-model", default=None, metavar="DIR",
                    help="also fit the hybrid model on all valid trips (the report's settings) "
                         "and save it to DIR, for predict, range and plan-charging")
