@@ -206,8 +206,9 @@ def parked_minutes(trips: pd.DataFrame, duration_s=None) -> pd.Series | None:
         row = trips.index[frame["row"].to_numpy()[overlap][0]]
         warnings.warn(f"start_time: {int(overlap.sum())} trip(s) start more than "
                       f"{OVERLAP_WARN_MIN:g} min before the previous trip of the same vehicle "
-                      f"ended (first at row {_py(row)!r}); two cars without a vehicle_id "
-                      "column, or durations in the wrong unit? taken as back to back (0 min)",
+                      f"ended (first at row {_py(row)!r}); a logger clock that drifts, two cars "
+                      "without a vehicle_id column, or durations in the wrong unit? taken as back "
+                      "to back (0 min)",
                       DataWarning, stacklevel=2)
     out = np.full(len(trips), np.nan)
     out[frame["row"].to_numpy()] = np.where(np.isnan(gap), np.nan,
