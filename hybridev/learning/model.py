@@ -670,6 +670,10 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
                 "n_parameters_per_member": self.n_parameters_}
         if heater is not None:
             info["heater"] = heater.to_dict()
+        if "parked_min" in good.columns:  # parking time (from start_time): what the fit saw
+            pk = pd.to_numeric(good["parked_min"], errors="coerce").to_numpy(float)
+            info["parking"] = {"n_known": int(np.isfinite(pk).sum()),
+                               "n_short_stop": int((pk < 30.0).sum())}
         if n_val:
             dev = self._residual_moments(xs[val_idx], scale[val_idx])[0].mean(0)
             pred = self._combine(e_phys[val_idx], dev)

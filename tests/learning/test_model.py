@@ -555,6 +555,8 @@ def test_start_times_give_parking_time_at_fit_and_predict(monkeypatch):
                                                 real(table, *a, **k))[1])
     m = HybridModel(**PAPER, vehicle=v, n_steps=N_STEPS, max_epochs=2).fit(t, seed=0)
     assert "parked_min" in seen[0]
+    assert m.fit_info_["parking"]["n_known"] == 23  # the first trip's gap is unknown
+    assert 0 < m.fit_info_["parking"]["n_short_stop"] <= 23
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         p = m.predict(t.drop(columns="energy_kwh"))

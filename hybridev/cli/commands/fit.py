@@ -117,6 +117,14 @@ def run(args: argparse.Namespace) -> int:
         h = info["heater"]
         print(f"heater learned from the trips: {h['kind']} (ln Bayes factor for a heat pump "
               f"{h['log_evidence']:.1f}; >= 3 chooses it; --heater declares it)")
+    if "parking" in info:
+        pk = info["parking"]
+        print(f"parking time from start_time: {pk['n_short_stop']} of {info['n_trips']} trips "
+              f"start less than 30 min after the previous one ended (a warm cabin); "
+              f"{info['n_trips'] - pk['n_known']} unknown (taken as soaked)")
+    else:
+        print("no start_time column: every trip starts with a soaked cabin (map your logger's "
+              "trip start to start_time, e.g. --columns start_time_local=start_time)")
     post = getattr(model, "posterior_", None)
     if post is not None:
         d = post.diagnostics
