@@ -87,7 +87,12 @@ def synthetic_logger(folder: Path, n_trips: int = 64) -> None:
         "trip_id": t.trip_id, "session_group": np.arange(n_trips) // 3,
         "date": "2023-04-01", "distance_km": t.distance_km,
         "mean_speed_kmh": t.avg_speed_kmh, "amb_temp_mean_c": t.temperature_c,
-        "e_batt_net_kwh": (kwh_per_km * t.distance_km).round(3)})
+        "e_batt_net_kwh": (kwh_per_km * t.distance_km).round(3),
+        # the logger's trip start: a session of 3 trips a day, two hours apart
+        "start_time_local": (pd.Timestamp("2023-04-01 07:00")
+                             + pd.to_timedelta(np.arange(n_trips) // 3, unit="D")
+                             + pd.to_timedelta(2 * (np.arange(n_trips) % 3), unit="h")
+                             ).strftime("%Y-%m-%d %H:%M:%S")})
     folder.mkdir()
     trips.to_csv(folder / "trips.csv", index=False)
     ts.to_parquet(folder / "timeseries_1hz.parquet", index=False)
