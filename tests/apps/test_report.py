@@ -32,6 +32,8 @@ def _measured_table(n: int = 60) -> pd.DataFrame:
     t = t.drop(columns=["energy_kwh_true"])
     t["trip_id"] = [f"t{i:03d}" for i in range(n)]
     t["session_group"] = [f"g{i // 3}" for i in range(n)]
+    t["start_time"] = (pd.Timestamp("2025-01-06 07:00") + pd.to_timedelta(np.arange(n) // 3, "D")
+                       + pd.to_timedelta(90 * (np.arange(n) % 3), "min")).astype(str)
     t["soc_final"] = (t["soc_initial"] - t["energy_kwh"] / 75.0).clip(lower=0.0)
     bad = t.iloc[:len(BAD)].copy()
     bad["trip_id"] = list(BAD)
@@ -341,3 +343,10 @@ def test_report_uses_the_vehicle_the_trips_were_read_for(tmp_path, monkeypatch):
             pytest.raises(Stop):
         R.calibration_report(m, out_dir=tmp_path / "b", vehicle=VehicleParams())
     assert seen["vehicle"] == VehicleParams()
+
+
+def test_predictions_carry_the_parking_time(run):
+    """A log with start times: predictions.csv gives each held-out trip's parked_min."""
+    p = pd.read_csv(run["out"] / "predictions.csv")
+    assert "parked_min" in p.columns
+    assert (p["parked_min"].dropna() >= 0).all() and p["parked_min"].notna().any()

@@ -303,8 +303,8 @@ def holdout_evaluation(measured: MeasuredTrips, test: np.ndarray, *,
         caught += [f"{w.category.__name__}: {w.message}" for w in rec]
     hyb = tabs[min(tabs)]  # point prediction and confidence do not depend on the level
     keep = [c for c in ("trip_id", group_column, "distance_km", "avg_speed_kmh",
-                        "temperature_c", "hour", "soc_initial", "mode") if c and c in
-            held.trips.columns]
+                        "temperature_c", "hour", "soc_initial", "mode", "parked_min")
+            if c and c in held.trips.columns]
     pred = held.trips[keep].reset_index(drop=True).assign(
         max_speed_kmh=st.max_speed_kmh, energy_kwh=y,
         energy_kwh_nominal=energy_from_stats(st),
