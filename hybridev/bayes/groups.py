@@ -68,9 +68,9 @@ def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
     if labels.dtype == object or pd.api.types.is_string_dtype(labels):
         dayfirst = False
         if column == "start_time":  # numeric dates in the order the column proves
-            from hybridev.data.parked import _day_first
+            from hybridev.data.parked import numeric_dates_day_first
 
-            dayfirst = _day_first(labels.dropna().astype(str))
+            dayfirst = numeric_dates_day_first(labels.dropna().astype(str))
         for text in (labels, labels.astype(object).where(labels.isna(), labels.astype(str)
                                                           .str.replace(_OFFSET, "", regex=True))):
             try:

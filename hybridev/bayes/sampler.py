@@ -83,6 +83,12 @@ def _moves():
     return emcee.moves.DEMove()
 
 
+def _check_traces(traces) -> None:
+    if traces is not None and not isinstance(traces, LoggedTraces):
+        raise ValueError("timeseries must be a LoggedTraces or a time-series DataFrame; got "
+                         f"{type(traces).__name__}")
+
+
 def _prepare(measured_trips, vehicle, timeseries) -> tuple[pd.DataFrame, LoggedTraces | None]:
     if isinstance(measured_trips, MeasuredTrips):
         traces = measured_trips.traces if timeseries is None else timeseries
@@ -97,14 +103,10 @@ def _prepare(measured_trips, vehicle, timeseries) -> tuple[pd.DataFrame, LoggedT
                                  "hybridev.data.logs.read_measured_trips)")
             trips, traces = m.trips, m.traces
         else:
-            if traces is not None and not isinstance(traces, LoggedTraces):
-                raise ValueError("timeseries must be a LoggedTraces or a time-series DataFrame; "
-                                 f"got {type(traces).__name__}")
+            _check_traces(traces)  # before their durations end the trips (parked_min)
             trips, _ = validate_measured_trips(with_parked_minutes(measured_trips, traces),
                                                vehicle)
-    if traces is not None and not isinstance(traces, LoggedTraces):
-        raise ValueError("timeseries must be a LoggedTraces or a time-series DataFrame; got "
-                         f"{type(traces).__name__}")
+    _check_traces(traces)
     return trips, traces
 
 

@@ -51,7 +51,8 @@ import pandas as pd
 
 from hybridev.core.errors import DataWarning
 
-__all__ = ["MAX_PARKED_MIN", "START_COLUMN", "parked_minutes", "with_parked_minutes"]
+__all__ = ["MAX_PARKED_MIN", "START_COLUMN", "numeric_dates_day_first", "parked_minutes",
+           "with_parked_minutes"]
 
 START_COLUMN = "start_time"
 """The trip column that gives each trip's start (local date and time)."""
@@ -81,8 +82,21 @@ def _refuse(what: str, value) -> None:
                      f"{_ALLOWED}")
 
 
-def _day_first(text: pd.Series) -> bool:
-    """Whether numeric dates (``dd/mm/yyyy`` or ``mm/dd/yyyy``) are day first; refuses a guess."""
+def numeric_dates_day_first(text: pd.Series) -> bool:
+    """Whether a column's numeric dates (``dd/mm/yyyy`` or ``mm/dd/yyyy``) are day first.
+
+    Decided by the column as a whole: a first number above 12 proves day first,
+    a second number above 12 month first. A column where every such date could be
+    either, or that proves both, is refused (``ValueError``). False when the
+    column has no numeric dates (e.g. ISO 8601, year first).
+
+    Examples
+    --------
+    >>> numeric_dates_day_first(pd.Series(["13/01/2025 07:00", "06/02/2025 08:00"]))
+    True
+    >>> numeric_dates_day_first(pd.Series(["2025-01-06 07:00"]))
+    False
+    """
     parts = text.str.extract(_NUMERIC_DATE).dropna().astype(int)
     if parts.empty:
         return False
@@ -123,7 +137,7 @@ def _starts(trips: pd.DataFrame) -> pd.Series | None:
                       f"without: {text[~offset].iloc[0]!r}); those without are read as UTC",
                       DataWarning, stacklevel=4)
     out = pd.to_datetime(raw.astype(object), errors="coerce", format="mixed", utc=True,
-                         dayfirst=_day_first(text))
+                         dayfirst=numeric_dates_day_first(text))
     out = out.dt.tz_localize(None)
     ok = out.dropna()
     if len(ok) and bool((ok == ok.dt.normalize()).all()) and len(ok) > 1:
