@@ -16,8 +16,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.core.errors import DataWarning
-
-_OFFSET = r"\s*(?:Z|UTC|[+-]\d{2}:?\d{2})$"  # a trailing UTC offset of a date-time string
+from hybridev.data.parked import UTC_OFFSET, numeric_dates_day_first
 
 __all__ = ["AUTO_GROUP_COLUMNS", "auto_group_column", "auto_group_labels", "group_labels"]
 
@@ -68,11 +67,9 @@ def group_labels(trips: pd.DataFrame, column: str) -> pd.Series:
     if labels.dtype == object or pd.api.types.is_string_dtype(labels):
         dayfirst = False
         if column == "start_time":  # numeric dates in the order the column proves
-            from hybridev.data.parked import numeric_dates_day_first
-
             dayfirst = numeric_dates_day_first(labels.dropna().astype(str))
         for text in (labels, labels.astype(object).where(labels.isna(), labels.astype(str)
-                                                          .str.replace(_OFFSET, "", regex=True))):
+                                                          .str.replace(UTC_OFFSET, "", regex=True))):
             try:
                 parsed = pd.to_datetime(text, errors="coerce", format="mixed",
                                         dayfirst=dayfirst)

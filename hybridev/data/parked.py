@@ -51,8 +51,8 @@ import pandas as pd
 
 from hybridev.core.errors import DataWarning
 
-__all__ = ["MAX_PARKED_MIN", "START_COLUMN", "numeric_dates_day_first", "parked_minutes",
-           "with_parked_minutes"]
+__all__ = ["MAX_PARKED_MIN", "START_COLUMN", "UTC_OFFSET", "numeric_dates_day_first",
+           "parked_minutes", "with_parked_minutes"]
 
 START_COLUMN = "start_time"
 """The trip column that gives each trip's start (local date and time)."""
@@ -69,7 +69,8 @@ _ALLOWED = ("a date and a time of day, e.g. '2024-01-05 08:00:00' (ISO 8601, yea
             "datetime values")
 _TIME_ONLY = r"^\s*\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?\s*$"
 _NUMERIC_DATE = r"^\s*(\d{1,2})[/.\-](\d{1,2})[/.\-]\d{2,4}"
-_OFFSET = r"(?:Z|[+-]\d{2}:?\d{2})\s*$"
+UTC_OFFSET = r"\s*(?:Z|UTC|[+-]\d{2}:?\d{2})$"
+"""A trailing UTC offset of a date-time string (also used by :mod:`hybridev.bayes.groups`)."""
 
 
 def _py(value):
@@ -131,7 +132,7 @@ def _starts(trips: pd.DataFrame) -> pd.Series | None:
     time_only = text.str.match(_TIME_ONLY)
     if time_only.any():
         _refuse("holds a time of day without a date", text[time_only].iloc[0])
-    offset = text.str.contains(_OFFSET)
+    offset = text.str.contains(UTC_OFFSET)
     if offset.any() and not offset.all():
         warnings.warn("start_time: some values carry a UTC offset and some do not (first "
                       f"without: {text[~offset].iloc[0]!r}); those without are read as UTC",
