@@ -67,31 +67,73 @@ relative least squares without any prior (what the data alone want).
 the calibrated physics with the discrepancy stage's term weights, no network)."""
 
 FREE = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency", "aux_base_kw",
-        "regen_scale", "heating_scale", "cooling_scale", "warmup_scale")
+        "regen_scale", "heating_scale", "cooling_scale", "warmup_scale", "heating_offset_k")
+
+WINTER_C = -10.0
+"""Ambient temperature of the winter what-if (M1's own trips replayed in the cold)."""
 
 
 def _fit_no_prior(stats, y: np.ndarray, idx: np.ndarray) -> dict[str, float]:
     """Least-squares relative fit of the physical parameters on trips ``idx``, no prior."""
     from scipy.optimize import least_squares
 
-    from hybridev.physics.stats import coefficients
-
     nom = {n: float(v) for n, v in zip(FREE, (
         stats.vehicle.drag_area_m2, stats.vehicle.rolling_resistance_coef,
-        stats.vehicle.drivetrain_efficiency, stats.vehicle.aux_base_kw, 1, 1, 1, 1),
-        strict=True)}
-    f = stats.features()[:, idx]
+        stats.vehicle.drivetrain_efficiency, stats.vehicle.aux_base_kw, 1, 1, 1, 1,
+        stats.vehicle.heating_offset_k), strict=True)}
+    sub = stats.take(np.sort(idx))
     base = {"linear_drag_n_per_mps": stats.vehicle.linear_drag_n_per_mps, "hvac_scale": 1.0,
             "drive_loss_kw": stats.vehicle.drive_loss_kw}
 
     def energy(x):
-        return np.array(coefficients(base | dict(zip(FREE, x, strict=True))), float) @ f
+        return energy_from_stats(sub, base | dict(zip(FREE, x, strict=True)))
 
-    lo = [0.05, 1e-4, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
-    hi = [3.0, 0.05, 1.0, 10.0, 1.5, 20.0, 20.0, 20.0]
-    r = least_squares(lambda x: energy(x) / y[idx] - 1.0, [nom[n] for n in FREE],
+    lo = [0.05, 1e-4, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, -10.0]
+    hi = [3.0, 0.05, 1.0, 10.0, 1.5, 20.0, 20.0, 20.0, 20.0]
+    r = least_squares(lambda x: energy(x) / y[np.sort(idx)] - 1.0, [nom[n] for n in FREE],
                       bounds=(lo, hi))
     return dict(zip(FREE, (float(v) for v in r.x), strict=True))
+
+
+def winter_what_if(m: MeasuredTrips, vehicle: VehicleParams, post_all) -> dict:
+    """M1's own trips and traces replayed at ``WINTER_C``: what each calibration predicts.
+
+    The car was logged at 5-30 degC only, so nothing here is measured: it shows how
+    the calibration extrapolates. Against the same trips at their logged temperatures:
+    energy ratio of the nominal physics, of the default calibration (heating scale and
+    heating onset) and of the calibration without the onset (heating scale alone, the
+    default before the onset existed), with the 90 % credible range of the ratio.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scale_only = calibrate_physics(
+            m, vehicle, seed=SEED, climate_params=False,
+            params=("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficiency",
+                    "aux_base_kw", "regen_scale", "heating_scale", "cooling_scale",
+                    "warmup_scale"))
+    tr = m.traces
+    cold_tr = dataclasses.replace(tr, temperature_c=np.full(len(tr.t_s), WINTER_C))
+    cold = m.trips.assign(temperature_c=WINTER_C)
+    out = {"temperature_c": WINTER_C, "n_trips": len(m.trips)}
+    nom_warm = energy_from_stats(trip_stats(m.trips, vehicle, traces=tr)).sum()
+    nom_cold = energy_from_stats(trip_stats(cold, vehicle, traces=cold_tr)).sum()
+    out["nominal_physics"] = {"ratio": float(nom_cold / nom_warm)}
+    for key, post in (("calibrated_onset", post_all), ("calibrated_scale_only", scale_only)):
+        kind = post.vehicle.heater_kind
+        warm = post.predictive(post.stats_for(m.trips, tr), n_draws=2000, seed=SEED,
+                               noise=False).sum(axis=1)
+        cw = post.predictive(post.stats_for(cold, cold_tr), n_draws=2000, seed=SEED,
+                             noise=False).sum(axis=1)
+        ratio = cw / warm
+        med = post.median()
+        out[key] = {"ratio": float(np.median(ratio)),
+                    "ratio_q05": float(np.quantile(ratio, 0.05)),
+                    "ratio_q95": float(np.quantile(ratio, 0.95)),
+                    "heater_kind": kind,
+                    "heating_scale": med.get("heating_scale"),
+                    "heating_offset_k": med.get("heating_offset_k"),
+                    "inside_prior_99": bool(post.prior_check()["inside"].all())}
+    return out
 
 
 def load(root: Path, vehicle: VehicleParams) -> tuple[MeasuredTrips, pd.DataFrame]:
@@ -266,6 +308,7 @@ def main(argv=None) -> int:
         "discrepancy_term_weights_by_fold": cv["term_weights"],
         "heater_kind_by_fold": cv["heater_by_fold"],
         "heater_log_evidence_by_fold": cv["heater_log_evidence_by_fold"],
+        "winter_what_if": winter_what_if(m, vehicle, post_all),
         "published_curve": rw_curves.curve_table(),
         "curve_diagnosis": rw_curves.diagnosis_minus15(),
         "tolerance": rw_curves.TOLERANCE,

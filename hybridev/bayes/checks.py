@@ -74,6 +74,13 @@ def prior_check(post, level: float = 0.99) -> pd.DataFrame:
         if kind == "lognormal":
             a, b, centre = np.exp(c - z * sd), np.exp(c + z * sd), np.exp(c)
             shift = (np.log(m) - c) / sd if m > 0 else -np.inf
+        elif kind == "splitnormal":  # mass sd_lo / (sd_lo + sd_hi) below the centre
+            s_lo, s_hi = sd
+            w = s_lo / (s_lo + s_hi)
+            tail = (1.0 - level) / 2.0
+            a = max(lo, c + s_lo * float(norm.ppf(tail / (2.0 * w))))
+            b = min(hi, c + s_hi * float(norm.ppf(0.5 + (1.0 - tail - w) / (2.0 * (1.0 - w)))))
+            centre, shift = c, (m - c) / (s_lo if m < c else s_hi)
         else:
             a, b, centre, shift = max(lo, c - z * sd), min(hi, c + z * sd), c, (m - c) / sd
         bound = np.nan  # a hard bound of the support the posterior presses against

@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from hybridev.physics.stats import PhysicsStats, coefficients
+from hybridev.physics.stats import (
+    HEATING_TERM,
+    WARMUP_TERM,
+    PhysicsStats,
+    coefficients,
+    interp_offset,
+)
 
 __all__ = []
 
@@ -35,6 +41,16 @@ class _LogPosterior:
         f = stats.features()
         self.rows = np.flatnonzero(np.abs(f).sum(axis=1) > 0)  # all-zero terms cost nothing
         self.F = f[self.rows]
+        # heating onset: energy changes on the offset grid (continuous climate model)
+        self.offset0 = stats.vehicle.heating_offset_k
+        self.dH = self.dW = None
+        moves = "heating_offset_k" in self.names or fixed.get(
+            "heating_offset_k", self.offset0) != self.offset0
+        if moves:
+            if stats.heating_offset_dkwh is None:
+                raise ValueError("heating_offset_k needs the continuous climate model "
+                                 "(VehicleParams(climate_model='continuous'))")
+            self.dH, self.dW = stats.heating_offset_dkwh, stats.warmup_offset_dkwh
         self.y = energy_kwh[stats.trip]
         self.y_trip = np.asarray(energy_kwh, dtype=float)
         self.log_w = stats.log_weight
@@ -53,7 +69,11 @@ class _LogPosterior:
             specs.append(("normal", 0.0, prior.group_sd_scale, 0.0, 0.5))  # half-normal tau
         self.kind_log = np.array([s[0] == "lognormal" for s in specs])
         self.centre = np.array([s[1] for s in specs], dtype=float)
-        self.sd = np.array([s[2] for s in specs], dtype=float)
+        # split normal: its own sd below the centre (others: the same on both sides)
+        self.sd = np.array([s[2][1] if s[0] == "splitnormal" else s[2] for s in specs],
+                           dtype=float)
+        self.sd_below = np.array([s[2][0] if s[0] == "splitnormal" else s[2] for s in specs],
+                                 dtype=float)
         self.lo = np.array([s[3] for s in specs], dtype=float)
         self.hi = np.array([s[4] for s in specs], dtype=float)
         self.log_noise = np.log(prior.noise_rel_bounds)
@@ -68,6 +88,9 @@ class _LogPosterior:
             live = k[:, None] < counts[None, :]
             idx = np.where(live, starts[None, :] + k[:, None], 0).ravel()
             self.F = np.where(live.ravel(), self.F[:, idx], 0.0)
+            if self.dH is not None:
+                self.dH = np.where(live.ravel()[:, None], self.dH[idx], 0.0)
+                self.dW = np.where(live.ravel()[:, None], self.dW[idx], 0.0)
             self.y = np.where(live.ravel(), self.y[idx], 1.0)
             self.log_w = np.where(live.ravel(), 0.0 if infer_modes else self.log_w[idx], -np.inf)
             self.shape = live.shape
@@ -85,7 +108,8 @@ class _LogPosterior:
         x = theta[:, :-1]
         inside = (x > self.lo) & (x < self.hi)
         lx = np.log(np.where(self.kind_log & inside, x, 1.0))
-        z = (np.where(self.kind_log, lx, x) - self.centre) / self.sd
+        d = np.where(self.kind_log, lx, x) - self.centre
+        z = d / np.where(d < 0, self.sd_below, self.sd)
         lp = (-0.5 * z * z - np.where(self.kind_log, lx, 0.0)).sum(axis=1)
         if self.n_alr:
             lp = lp + self.log_pi(theta).sum(axis=1)  # Dirichlet(1, 1, 1) in alr coordinates
@@ -120,9 +144,12 @@ class _LogPosterior:
 
     def log_lik(self, theta: np.ndarray) -> np.ndarray:
         v = self.values(theta)
-        coef = np.stack([np.broadcast_to(c, (len(theta),)) for c in coefficients(v)],
-                        axis=1)[:, self.rows]
-        e = coef @ self.F
+        full = np.stack([np.broadcast_to(c, (len(theta),)) for c in coefficients(v)], axis=1)
+        e = full[:, self.rows] @ self.F
+        if self.dH is not None:  # the heating onset moves the heating and warm-up terms
+            d = v["heating_offset_k"][:, None] - self.offset0
+            e = (e + full[:, HEATING_TERM, None] * interp_offset(self.dH, d)
+                 + full[:, WARMUP_TERM, None] * interp_offset(self.dW, d))
         if self.n_group:
             return self._group_log_lik(theta, e)
         log_sig = theta[:, -1]

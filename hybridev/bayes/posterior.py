@@ -146,7 +146,8 @@ class PhysicsPosterior:
                 "drivetrain_efficiency": vehicle.drivetrain_efficiency,
                 "aux_base_kw": vehicle.aux_base_kw, "regen_scale": 1.0, "hvac_scale": 1.0,
                 "warmup_scale": 1.0, "heating_scale": 1.0, "cooling_scale": 1.0,
-                "drive_loss_kw": vehicle.drive_loss_kw}
+                "drive_loss_kw": vehicle.drive_loss_kw,
+                "heating_offset_k": vehicle.heating_offset_k}
 
     @classmethod
     def from_sampler(cls, sampler, names, *, vehicle, reference_vehicle, prior, map_theta,

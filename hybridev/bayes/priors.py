@@ -28,8 +28,9 @@ DEFAULT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "drivetrain_efficie
 """Parameters calibrated by default: road load, efficiency, base auxiliary
 power and regeneration."""
 
-CLIMATE_PARAMS = ("heating_scale", "cooling_scale", "warmup_scale")
-"""Climate scales (steady heating power, steady cooling power, warm-up energy) that
+CLIMATE_PARAMS = ("heating_scale", "cooling_scale", "warmup_scale", "heating_offset_k")
+"""Climate parameters (steady heating power, steady cooling power, warm-up energy
+scales, and the driver's heating onset) that
 :func:`hybridev.bayes.sampler.calibrate_physics` adds to the sampled set by
 default when the vehicle uses the continuous climate model."""
 
@@ -47,9 +48,10 @@ class PhysicsPrior:
     road conditions: wind, surface, tyre temperature), so that the climate
     and auxiliary terms take up what the road load does not explain.
     Efficiency is known to a few points, auxiliary load only to a factor of
-    ~1.6, the climate load (cabin ``UA``, set point) to a factor of ~1.6
-    and the warm-up energy (cabin heat capacity, soak state: a car parked in
-    a garage needs less) to a factor of ~2.
+    ~1.6, the climate load (cabin ``UA``, set point) to a factor of ~2.2,
+    the warm-up energy (cabin heat capacity, soak state: a car parked in
+    a garage needs less) to a factor of ~2, and the temperature at which a
+    driver starts heating to ~5 K.
 
     Parameters
     ----------
@@ -81,12 +83,35 @@ class PhysicsPrior:
         widened: the one published fleet curve that stays nearly flat in
         mild cold (Tesla Model S down to -4 degC, FleetCarma 2016) is
         explained by battery and cabin conditioning between trips, energy
-        that a trip's measurement does not contain. A posterior share below
-        ~1/8 (a car preconditioned while parked, a driver who does not heat
-        in mild weather) is therefore flagged by the calibration report
-        rather than absorbed by a wider prior.
+        that a trip's measurement does not contain. A driver who does not
+        heat in mild weather is the heating *onset*'s to explain
+        (``heating_offset_k``, below), not this scale's; a posterior share
+        below ~1/8 (a car preconditioned while parked) is flagged by the
+        calibration report rather than absorbed by a wider prior.
     warmup_log_sd : float
         ``log warmup_scale ~ N(0, sd)``; the scale multiplies the warm-up energy.
+    heating_offset_sd_k : tuple of 2 float, K
+        ``heating_offset_k`` (how far below the physical balance point, 17.4
+        degC by default, a driver starts heating) has a split-normal prior
+        centred on the nominal value: sd ``(below, above)`` = (2, 5) K,
+        truncated to ``heating_offset_bounds_k``; 99 % of it lies in about
+        [-4.8, +13.5] K. Later onsets (positive) are the wide side: clothing
+        (a coat is about one clo more than indoor clothing, 6-8 K of
+        comfortable temperature at sedentary activity, ASHRAE 55) and daytime
+        sun through the glazing (0 to ~1 kW, 0-9 K at the default cabin
+        ``UA``). Earlier onsets (negative) need a warmer set point (+-1.5 K
+        between drivers) or fewer gains than the default's (no sun at night:
+        ~2 K), so that side is narrow: a wide one let a car trained on warm
+        trips only (20-28 degC) explain a little unmodelled energy there as
+        heating from 24 degC and then over-predict its cool trips with narrow
+        intervals (``evaluation/shift_and_small_data``, M1 warm-trained
+        folds). The onset separates *when* a car heats, which mild-weather
+        trips pin down, from *how much* a cold cabin needs
+        (``heating_scale``): a car logged at 5-15 degC that barely heats then
+        keeps a physical heating slope for winter instead of a tiny scale
+        that would also apply at -15 degC.
+    heating_offset_bounds_k : tuple of 2 float, K
+        Support of ``heating_offset_k`` relative to the nominal value.
     coastdown_log_sd : float
         Replaces ``drag_area_log_sd`` and ``rolling_resistance_log_sd`` when
         the vehicle's road load comes from a coast-down.
@@ -115,6 +140,8 @@ class PhysicsPrior:
     aux_log_sd: float = 0.5
     hvac_log_sd: float = 0.8
     warmup_log_sd: float = 0.7
+    heating_offset_sd_k: tuple[float, float] = (2.0, 5.0)
+    heating_offset_bounds_k: tuple[float, float] = (-10.0, 20.0)
     coastdown_log_sd: float = 0.10
     group_sd_scale: float = 0.05
     regen_scale_sd: float = 0.2
@@ -137,6 +164,16 @@ class PhysicsPrior:
         if not 0.0 < nlo < nhi <= 10.0:
             raise ValueError(f"PhysicsPrior.noise_rel_bounds={self.noise_rel_bounds!r} must "
                              "satisfy 0 < lo < hi <= 10")
+        sdl, sdh = (float(x) for x in self.heating_offset_sd_k)
+        if not (np.isfinite(sdl) and np.isfinite(sdh) and sdl > 0 and sdh > 0):
+            raise ValueError(f"PhysicsPrior.heating_offset_sd_k={self.heating_offset_sd_k!r} "
+                             "must be two values in (0, inf) K (below, above the centre)")
+        object.__setattr__(self, "heating_offset_sd_k", (sdl, sdh))
+        olo, ohi = (float(x) for x in self.heating_offset_bounds_k)
+        if not -30.0 <= olo < 0.0 < ohi <= 30.0:
+            raise ValueError(f"PhysicsPrior.heating_offset_bounds_k={self.heating_offset_bounds_k!r}"
+                             " must satisfy -30 <= lo < 0 < hi <= 30 (K)")
+        object.__setattr__(self, "heating_offset_bounds_k", (olo, ohi))
         object.__setattr__(self, "efficiency_bounds", (lo, hi))
         object.__setattr__(self, "noise_rel_bounds", (nlo, nhi))
 
@@ -144,7 +181,10 @@ class PhysicsPrior:
              coastdown: bool = False) -> tuple:
         """``(kind, centre, sd, lo, hi)`` of one parameter's prior (natural units).
 
-        ``coastdown``: the road load was measured (tighter ``C_dA``, ``C_r``).
+        ``kind`` is ``"normal"``, ``"lognormal"`` (``centre`` and ``sd`` of the
+        log) or ``"splitnormal"`` (``sd`` a pair: below and above the centre),
+        truncated to ``(lo, hi)``. ``coastdown``: the road load was measured
+        (tighter ``C_dA``, ``C_r``).
         """
         if name in ("drag_area_m2", "rolling_resistance_coef", "aux_base_kw", "drive_loss_kw"):
             sd = {"drag_area_m2": self.drag_area_log_sd,
@@ -160,6 +200,9 @@ class PhysicsPrior:
             return "lognormal", 0.0, self.hvac_log_sd, 0.0, np.inf
         if name == "warmup_scale":
             return "lognormal", 0.0, self.warmup_log_sd, 0.0, np.inf
+        if name == "heating_offset_k":
+            lo, hi = self.heating_offset_bounds_k
+            return "splitnormal", nominal, self.heating_offset_sd_k, nominal + lo, nominal + hi
         if name == "linear_drag_n_per_mps":
             return "normal", nominal, self.linear_drag_sd_n_per_mps, 0.0, np.inf
         if name == "drivetrain_efficiency":

@@ -161,7 +161,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         Rebuild the statistics' sign split at the MAP before sampling.
     climate_params : bool, optional
         Also sample :data:`~hybridev.bayes.priors.CLIMATE_PARAMS` (climate
-        power and warm-up scales) when not in ``params``. Default: yes for a
+        power and warm-up scales, and the heating onset ``heating_offset_k``,
+        which the paper's band model does not have) when not in ``params``. Default: yes for a
         vehicle with the continuous climate model (its climate load is the
         least known part of a new car), no for the paper's band model.
     sign_vehicle : VehicleParams, optional
@@ -217,7 +218,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     if climate_params is None:
         climate_params = veh.climate_model == "continuous"
     if climate_params:
-        names += tuple(n for n in CLIMATE_PARAMS if n not in names)
+        names += tuple(n for n in CLIMATE_PARAMS if n not in names and (
+            n != "heating_offset_k" or veh.climate_model == "continuous"))  # no onset in bands
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"params={params!r} must be distinct names from {list(STAT_PARAMS)}")
     for n in names:
@@ -245,7 +247,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
 
     heater = None
     if veh.heater_kind == "auto" and veh.climate_model == "continuous":
-        heater = select_heater_kind(build, veh, y, groups=codes)  # bayes.heater
+        heater = select_heater_kind(build, veh, y, groups=codes, prior=pr)  # bayes.heater
         veh = dataclasses.replace(veh, heater_kind=heater.kind)
     if sign_vehicle is not None and sign_vehicle.heater_kind != veh.heater_kind:
         sign_vehicle = dataclasses.replace(sign_vehicle, heater_kind=veh.heater_kind)
@@ -271,7 +273,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     cd = veh.road_load_source == "coastdown"
     specs = [pr.spec(n, nominal[n], REGEN_EFFICIENCY_MAX, coastdown=cd) for n in names]
     fixed = {n: nominal[n] for n in STAT_PARAMS if n not in names}
-    scale = np.array([s[2] * (np.exp(s[1]) if s[0] == "lognormal" else 1.0) for s in specs]
+    scale = np.array([max(np.atleast_1d(s[2])) * (np.exp(s[1]) if s[0] == "lognormal" else 1.0)
+                      for s in specs]
                      + [1.0] * n_alr + [pr.group_sd_scale] * n_group + [1.0])
     x0 = np.r_[[nominal[n] for n in names], np.zeros(n_alr), [0.5 * pr.group_sd_scale] * n_group]
     logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer, codes)

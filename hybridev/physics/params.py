@@ -131,6 +131,21 @@ class VehicleParams:
         electronics, sun through the glazing), W: heating starts below
         ``t_set_c - cabin_gain_w / cabin_ua_w_per_k`` (17.4 degC by default);
         in warm weather they add to the A/C load.
+    heating_offset_k : float
+        Kelvin by which the driver's heating onset lies below the balance
+        point: the cabin is heated only below ``heating_balance_c`` =
+        ``t_set_c - cabin_gain_w / cabin_ua_w_per_k - heating_offset_k``, and
+        the heating power and the cabin's warm-up follow
+        ``T_b - heating_offset_k - T``. 0 by default. Drivers differ most in
+        *when* they heat, not in how much heat a cold cabin needs: a driver
+        dressed for the weather is comfortable several kelvin cooler (about
+        6-8 K per clo of extra clothing at sedentary activity, ASHRAE 55),
+        daytime sun through the glazing adds up to ~1 kW (~9 K of balance point
+        at 110 W/K), and seat heating replaces air heating in mild weather.
+        Calibrated as ``heating_offset_k`` (:class:`hybridev.bayes.priors.PhysicsPrior`,
+        ``heating_offset_sd_k``), like the building-energy practice of fitting
+        a house's balance-point temperature with its heating slope from
+        metered use (PRISM, Fels 1986). Negative: heating starts warmer.
     heating_use, cooling_use : float
         Share of the modelled heating (cooling) power the car and its
         driver actually draw, 1 by default: below 1 for seat heating
@@ -225,6 +240,7 @@ class VehicleParams:
     heater_max_kw: float = 5.5
     t_set_c: float = 21.0
     cabin_gain_w: float = 400.0
+    heating_offset_k: float = 0.0
     heating_use: float = 1.0
     cooling_use: float = 1.0
     ac_cop: float = 2.5
@@ -265,6 +281,7 @@ class VehicleParams:
         for name, lo, hi in (("cabin_ua_w_per_k", 0.0, 2000.0), ("heater_max_kw", 0.0, 50.0),
                              ("t_set_c", 5.0, 35.0), ("ac_max_kw", 0.0, 50.0),
                              ("solar_gain_w", 0.0, 5000.0), ("cabin_gain_w", 0.0, 5000.0),
+                             ("heating_offset_k", -40.0, 60.0),
                              ("cabin_heat_capacity_kj_per_k", 0.0, 2000.0),
                              ("battery_warmup_kwh_per_k", 0.0, 1.0),
                              ("battery_heat_below_c", -40.0, 40.0),

@@ -22,6 +22,12 @@ folded into ``mult`` and ``eta_r``. Then
 :func:`energy_from_stats` evaluates thousands of parameter draws against all
 trips in one broadcast.
 
+The driver's heating onset ``heating_offset_k`` is not linear: it moves which
+intervals are heated. For it the statistics hold the heating and warm-up energies
+on a grid of onsets (:data:`HEATING_OFFSET_GRID_K`, continuous climate model), and
+:func:`energy_from_stats` interpolates between them: exact on the grid, within
+``UA x 0.5 K`` of heating power between grid points.
+
 The split is taken at the parameters the statistics were built with
 (``stats.vehicle``), so energies are **exact** there (to rounding; tested to
 1e-9 relative) and approximate elsewhere: moving ``C_dA`` and ``C_r`` changes
@@ -58,20 +64,34 @@ import numpy as np
 from hybridev.physics.params import VehicleParams
 
 __all__ = [
+    "HEATING_OFFSET_GRID_K",
     "N_TERMS",
     "REGEN_TERMS",
     "STAT_PARAMS",
     "PhysicsStats",
     "coefficients",
     "energy_from_stats",
+    "interp_offset",
+    "offset_deltas",
     "row_energy",
     "term_energies",
 ]
 
 STAT_PARAMS = ("drag_area_m2", "rolling_resistance_coef", "linear_drag_n_per_mps",
                "drivetrain_efficiency", "aux_base_kw", "regen_scale", "hvac_scale",
-               "warmup_scale", "heating_scale", "cooling_scale", "drive_loss_kw")
+               "warmup_scale", "heating_scale", "cooling_scale", "drive_loss_kw",
+               "heating_offset_k")
 """Parameters :func:`energy_from_stats` can vary."""
+
+HEATING_OFFSET_GRID_K = np.arange(-30.0, 30.0 + 1e-9, 2.0)
+"""Offsets of the heating onset (K, relative to ``stats.vehicle.heating_offset_k``) at
+which the statistics hold the heating and warm-up energies (continuous climate model).
+
+Energy is not linear in ``heating_offset_k`` (it moves which intervals are heated), so
+:func:`energy_from_stats` interpolates linearly between these offsets: exact on the
+grid (at the statistics' own vehicle in particular), and between grid points off by
+at most a quarter of the heating power's change over 2 K (``UA x 0.5 K``, ~55 W at
+110 W/K) for a trip whose temperature lies at its heating onset."""
 
 _J_PER_KWH = 3.6e6
 _SUMS = ("roll", "aero", "lin", "rest")
@@ -115,6 +135,12 @@ class PhysicsStats:
     moving_h : numpy.ndarray, shape (n_rows,), h, optional
         Time with interval-mean speed above 0.5 m/s (``drive_loss_kw``
         multiplies it).
+    heating_offset_dkwh, warmup_offset_dkwh : numpy.ndarray, shape (n_rows, n_grid), kWh, optional
+        Change of the heating energy (``(hvac_kw - cooling_kw) * duration_h``)
+        and of the warm-up energy when the heating onset moves by
+        :data:`HEATING_OFFSET_GRID_K` from ``vehicle.heating_offset_k`` (zero
+        at offset 0); continuous climate model only. ``heating_offset_k`` in
+        the parameters of :func:`energy_from_stats` uses them.
     """
 
     roll_pos: np.ndarray
@@ -138,6 +164,8 @@ class PhysicsStats:
     warmup_kwh: np.ndarray | None = None
     cooling_kw: np.ndarray | None = None
     moving_h: np.ndarray | None = None
+    heating_offset_dkwh: np.ndarray | None = None
+    warmup_offset_dkwh: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("warmup_kwh", "cooling_kw", "moving_h"):
@@ -189,7 +217,8 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
             "linear_drag_n_per_mps": v.linear_drag_n_per_mps,
             "drivetrain_efficiency": v.drivetrain_efficiency, "aux_base_kw": v.aux_base_kw,
             "regen_scale": 1.0, "hvac_scale": 1.0, "warmup_scale": 1.0,
-            "heating_scale": 1.0, "cooling_scale": 1.0, "drive_loss_kw": v.drive_loss_kw}
+            "heating_scale": 1.0, "cooling_scale": 1.0, "drive_loss_kw": v.drive_loss_kw,
+            "heating_offset_k": v.heating_offset_k}
     if isinstance(params, VehicleParams):
         params = {"drag_area_m2": params.drag_area_m2,
                   "rolling_resistance_coef": params.rolling_resistance_coef,
@@ -240,6 +269,57 @@ def _check_term_weights(term_weights) -> np.ndarray:
     return w
 
 
+HEATING_TERM, WARMUP_TERM = 9, 11
+"""Rows of :meth:`PhysicsStats.features` that move with ``heating_offset_k``."""
+
+
+def interp_offset(grid: np.ndarray, offset_k) -> np.ndarray:
+    """Linear interpolation of per-row grids over :data:`HEATING_OFFSET_GRID_K`.
+
+    Parameters
+    ----------
+    grid : numpy.ndarray, shape (n_rows, n_grid)
+    offset_k : float or array_like, K
+        Offsets relative to the statistics' vehicle, broadcastable against
+        ``(n_rows,)`` (e.g. ``(n_draws, 1)``); clipped to the grid's range.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``broadcast(offset_k, (n_rows,))``
+
+    Examples
+    --------
+    >>> g = np.tile(HEATING_OFFSET_GRID_K, (2, 1))  # a grid equal to the offset itself
+    >>> interp_offset(g, np.array([[1.0], [-3.5]])).tolist()
+    [[1.0, 1.0], [-3.5, -3.5]]
+    """
+    x = HEATING_OFFSET_GRID_K
+    u = np.clip((np.asarray(offset_k, dtype=float) - x[0]) / (x[1] - x[0]), 0.0, x.size - 1)
+    i = np.minimum(np.floor(u).astype(np.intp), x.size - 2)
+    shape = np.broadcast_shapes(np.shape(u), (grid.shape[0],))
+    ib = np.broadcast_to(i, shape)
+    f = np.broadcast_to(u - i, shape)
+    r = np.broadcast_to(np.arange(grid.shape[0]), shape)
+    return grid[r, ib] * (1.0 - f) + grid[r, ib + 1] * f
+
+
+def offset_deltas(stats: PhysicsStats, heating_offset_k):
+    """(heating, warm-up) energy changes (kWh) at ``heating_offset_k``, or None when zero.
+
+    Shapes ``broadcast(heating_offset_k, (n_rows,))``. Raises ``ValueError``
+    when the offset differs from the statistics' vehicle but they hold no grid
+    (the paper's band climate model has no heating onset).
+    """
+    d = np.asarray(heating_offset_k, dtype=float) - stats.vehicle.heating_offset_k
+    if not np.any(d != 0.0):
+        return None
+    if stats.heating_offset_dkwh is None or stats.warmup_offset_dkwh is None:
+        raise ValueError("heating_offset_k needs statistics of the continuous climate model "
+                         "(VehicleParams(climate_model='continuous')); these have none")
+    return (interp_offset(stats.heating_offset_dkwh, d),
+            interp_offset(stats.warmup_offset_dkwh, d))
+
+
 def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarray:
     """Energy of every row (trip, or trip and mode), shape ``broadcast(params) + (n_rows,)``, kWh.
 
@@ -256,8 +336,13 @@ def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarra
         c = np.stack([np.broadcast_to(x, shape) for x in coef], axis=-1)
         # einsum, not BLAS: each trip's energy is then the same whatever the other rows
         # (partitions of a dask frame give bit-identical results to one pandas frame)
-        return np.einsum("...k,kr->...r", c[..., 0, :] if shape else c, stats.features())
-    return sum(c * f for c, f in zip(coef, stats.features(), strict=True))
+        e = np.einsum("...k,kr->...r", c[..., 0, :] if shape else c, stats.features())
+    else:
+        e = sum(c * f for c, f in zip(coef, stats.features(), strict=True))
+    moved = offset_deltas(stats, p["heating_offset_k"])
+    if moved is not None:
+        e = e + coef[HEATING_TERM] * moved[0] + coef[WARMUP_TERM] * moved[1]
+    return e
 
 
 def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
@@ -282,11 +367,17 @@ def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
     >>> bool(np.allclose(term_energies(s).sum(axis=1), energy_from_stats(s)))
     True
     """
+    p = _param_values(stats, params)
     coef = np.array([float(np.asarray(c).reshape(-1)[0]) if np.size(c) == 1 else np.nan
-                     for c in coefficients(_param_values(stats, params))])
-    if not np.all(np.isfinite(coef)):
+                     for c in coefficients(p)])
+    if not np.all(np.isfinite(coef)) or np.size(p["heating_offset_k"]) != 1:
         raise ValueError("term_energies takes one parameter set (scalar values)")
-    t = (coef[:, None] * stats.features()).T
+    f = stats.features()
+    moved = offset_deltas(stats, float(np.asarray(p["heating_offset_k"]).reshape(-1)[0]))
+    if moved is not None:
+        f[HEATING_TERM] += moved[0]
+        f[WARMUP_TERM] += moved[1]
+    t = (coef[:, None] * f).T
     if not stats.marginalised:
         return t
     w = np.exp(stats.log_weight)[:, None]

@@ -6,6 +6,8 @@ follows from them.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pandas as pd
 
@@ -13,7 +15,7 @@ from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.forces import MOVING_MPS, _moving_steps
 from hybridev.physics.kinematics import profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
-from hybridev.physics.stats import _J_PER_KWH, _SUMS, PhysicsStats
+from hybridev.physics.stats import _J_PER_KWH, _SUMS, HEATING_OFFSET_GRID_K, PhysicsStats
 from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
 from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import _blocks
@@ -42,15 +44,37 @@ def _profile_consts(profile, n: int):
     return t["efficiency_multiplier"], t["regen_efficiency"], t["aux_kw"]
 
 
+def _offset_vehicles(veh: VehicleParams) -> list[VehicleParams]:
+    """``veh`` with its heating onset moved by each of :data:`HEATING_OFFSET_GRID_K`.
+
+    Built without ``VehicleParams``' range checks (an offset of the grid may lie
+    outside the range a user may set; the thermal functions only read it).
+    """
+    out = []
+    for g in HEATING_OFFSET_GRID_K:
+        v = copy.copy(veh)
+        object.__setattr__(v, "heating_offset_k", veh.heating_offset_k + float(g))
+        out.append(v)
+    return out
+
+
+def _heating_grid_kw(temperature_c: np.ndarray, vehicles) -> np.ndarray:
+    """Steady heating power at each offset vehicle, shape (n, n_grid), kW."""
+    return np.stack([climate_split_kw(temperature_c, v)[0] for v in vehicles], axis=-1)
+
+
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
               start_temperature_c=None, cooling_kw=None, moving_s=None,
-              parked_s=None) -> PhysicsStats:
+              parked_s=None, heating_grid_kw=None, offset_grid: bool = True) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
     temperatures) and ``start_temperature_c`` (warm-up) default to the values
     at ``temperature_c``; ``parked_s`` (per row, NaN: soaked) scales the warm-up.
+    ``heating_grid_kw`` (n, n_grid): mean heating power at each onset offset
+    (rows of NaN, or None: from ``temperature_c``); ``offset_grid=False`` skips
+    the offset grids (statistics only summed by the caller).
     """
     n = len(duration_s)
     mult, eta_r, mode_kw = _profile_consts(profile, n)
@@ -59,6 +83,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
     duration_s = np.asarray(duration_s, float)
     warm = np.zeros(n)
     cool = np.zeros(n)
+    d_heat = d_warm = None
     if veh.climate_model == "continuous":
         cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
         trac, regen = cold_factors(t, veh)
@@ -66,6 +91,19 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         t0 = t if start_temperature_c is None else start_temperature_c
         warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh, parked_s=parked_s),
                                (n,)).copy()
+        if offset_grid:
+            vs = _offset_vehicles(veh)
+            hg = (np.full((n, len(vs)), np.nan) if heating_grid_kw is None
+                  else np.array(heating_grid_kw, dtype=float).reshape(n, len(vs)))
+            todo = np.isnan(hg).any(axis=1)
+            if todo.any():
+                hg[todo] = _heating_grid_kw(t[todo], vs)
+            i0 = int(np.flatnonzero(HEATING_OFFSET_GRID_K == 0.0)[0])
+            d_heat = (hg - hg[:, i0:i0 + 1]) * (duration_s / 3600.0)[:, None]
+            wg = np.stack([np.broadcast_to(warmup_energy_kwh(t0, duration_s, v,
+                                                             parked_s=parked_s), (n,))
+                           for v in vs], axis=-1)
+            d_warm = wg - wg[:, i0:i0 + 1]
     kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
     kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
     return PhysicsStats(
@@ -75,11 +113,13 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         log_weight=np.zeros(n) if log_weight is None else log_weight,
         n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
         warmup_kwh=warm, cooling_kw=cool,
-        moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0)
+        moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0,
+        heating_offset_dkwh=d_heat, warmup_offset_dkwh=d_warm)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
-                      profile="normal", temperature_c=20.0, grade_rad=0.0) -> PhysicsStats:
+                      profile="normal", temperature_c=20.0, grade_rad=0.0,
+                      _offset_grid: bool = True) -> PhysicsStats:
     """Statistics of uniformly sampled traces (same arguments as :func:`hybridev.trace_energy_kwh`).
 
     Parameters
@@ -131,7 +171,7 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
                      max_speed_kmh=v.max(axis=1) * 3.6,
-                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0])
+                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0], offset_grid=_offset_grid)
 
 
 def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
@@ -229,34 +269,43 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     vmax = np.zeros(n)
     np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
-    heat, cool = _logged_climate_kw(traces, veh, start, trip, dt)
+    heat, cool, grid = _logged_climate_kw(traces, veh, start, trip, dt)
     vm = v[start] + v[nxt]
     moving = np.bincount(trip, np.where(vm > 2.0 * MOVING_MPS, dt, 0.0), minlength=n)
     return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
                      climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
                      moving_s=moving,
                      parked_s=None if parked_s is None else np.broadcast_to(
-                         np.asarray(parked_s, float), (n,)))
+                         np.asarray(parked_s, float), (n,)), heating_grid_kw=grid)
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
     """Time-mean steady (heating, cooling) power of each trip from its per-step temperature, kW.
 
     Only for the continuous climate model and traces with a temperature
-    column; ``(None, None)`` otherwise (the trip temperature is then used).
+    column; ``(None, None, None)`` otherwise (the trip temperature is then
+    used). The third value is the heating power at each heating-onset offset
+    of :data:`~hybridev.physics.stats.HEATING_OFFSET_GRID_K`, shape (n, n_grid).
     """
     if veh.climate_model != "continuous" or traces.temperature_c is None:
-        return None, None
+        return None, None, None
     tt = traces.temperature_c
     n = len(traces)
     tot = np.bincount(trip, dt, minlength=n)
-    fallback = climate_split_kw(traces.per_trip_mean(tt), veh)
-    out = []
-    for p, fb in zip(climate_split_kw(0.5 * (tt[start] + tt[start + 1]), veh), fallback,
-                     strict=True):
-        mean = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
-        out.append(np.where(tot > 0, mean, fb))
-    return tuple(out)
+    mean_t = traces.per_trip_mean(tt)
+    mid = 0.5 * (tt[start] + tt[start + 1])
+
+    def mean_of(p, fb):
+        m = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
+        return np.where(tot > 0, m, fb)
+
+    out = [mean_of(p, fb) for p, fb in zip(climate_split_kw(mid, veh),
+                                           climate_split_kw(mean_t, veh), strict=True)]
+    vs = _offset_vehicles(veh)
+    fallback = _heating_grid_kw(mean_t, vs)
+    grid = np.stack([mean_of(climate_split_kw(mid, v)[0], fallback[:, j])
+                     for j, v in enumerate(vs)], axis=-1)
+    return out[0], out[1], grid
 
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
@@ -333,6 +382,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
                else np.zeros(len(trip)))
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
+    heat_grid = None
     duration = np.zeros(len(trip))
     moving = np.zeros(len(trip))
     vmax = np.zeros(len(trip))
@@ -348,6 +398,12 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         climate[rl] = sl.hvac_kw[src]
         moving[rl] = sl.moving_h[src] * 3600.0
         cooling[rl] = sl.cooling_kw[src]
+        if sl.heating_offset_dkwh is not None:  # per-step temperatures: the logged grid
+            heat_grid = np.full((len(trip), HEATING_OFFSET_GRID_K.size), np.nan)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                g = (sl.heating_offset_dkwh[src] / sl.duration_h[src, None]
+                     + (sl.hvac_kw - sl.cooling_kw)[src, None])
+            heat_grid[rl] = np.where(np.isfinite(g), g, (sl.hvac_kw - sl.cooling_kw)[src, None])
     if (~rl).any():
         cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
                 "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
@@ -359,7 +415,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         dest = np.flatnonzero(~rl)
         for blk, v, dt, grade in _blocks(syn, n_steps, seed):
             s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
-                                  grade_rad=grade)
+                                  grade_rad=grade, _offset_grid=False)
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
@@ -369,7 +425,8 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
-                    moving_s=moving, parked_s=None if parked is None else parked[trip])
+                    moving_s=moving, parked_s=None if parked is None else parked[trip],
+                    heating_grid_kw=heat_grid)
 
 
 def parked_seconds(trips: pd.DataFrame) -> np.ndarray | None:

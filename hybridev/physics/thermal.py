@@ -6,7 +6,9 @@ four-band model stays in :func:`hybridev.physics.climate.hvac_power_kw`.
 
 Steady climate power at ambient temperature ``T`` (degC). Occupants and
 devices add ``G_in`` (``cabin_gain_w``), so heating starts below the balance
-point ``T_b = T_set - G_in / UA`` (:func:`heating_balance_c`):
+point ``T_b = T_set - G_in / UA - delta`` (:func:`heating_balance_c`; ``delta``
+= ``heating_offset_k``, the driver's heating onset below the physical balance
+point, 0 by default):
 
 * heating (``T < T_b``): ``P_h = min(UA (T_b - T) / COP(T), P_heater_max)``, with
   ``COP = 1`` for a resistive (PTC) heater and :func:`heat_pump_cop` for a
@@ -96,10 +98,12 @@ def _heating_cop(t: np.ndarray, v: VehicleParams) -> np.ndarray:
 
 
 def heating_balance_c(vehicle: VehicleParams) -> float:
-    """Ambient temperature below which the cabin needs heat, degC.
+    """Ambient temperature below which the cabin is heated, degC.
 
-    ``t_set_c - cabin_gain_w / cabin_ua_w_per_k``: occupants and devices
-    keep the cabin at its set point down to this temperature.
+    ``t_set_c - cabin_gain_w / cabin_ua_w_per_k - heating_offset_k``:
+    occupants and devices keep the cabin at its set point down to the
+    balance point ``t_set_c - cabin_gain_w / cabin_ua_w_per_k``, and the
+    driver's heating onset lies ``heating_offset_k`` below it.
 
     Examples
     --------
@@ -108,8 +112,8 @@ def heating_balance_c(vehicle: VehicleParams) -> float:
     """
     v = vehicle
     if v.cabin_ua_w_per_k <= 0:
-        return v.t_set_c
-    return v.t_set_c - v.cabin_gain_w / v.cabin_ua_w_per_k
+        return v.t_set_c - v.heating_offset_k
+    return v.t_set_c - v.cabin_gain_w / v.cabin_ua_w_per_k - v.heating_offset_k
 
 
 def _split_kw(t: np.ndarray, v: VehicleParams) -> tuple[np.ndarray, np.ndarray]:

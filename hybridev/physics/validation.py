@@ -27,7 +27,7 @@ __all__ = [
 REQUIRED_TRIP_COLUMNS = ("distance_km", "avg_speed_kmh", "mode", "temperature_c", "soc_initial")
 """Columns every trip table must have."""
 
-OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id", "parked_min")
+OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id", "parked_min", "duration_s")
 """Columns a trip table may have."""
 
 
@@ -68,6 +68,9 @@ TRIP_RULES: dict[str, FieldRule] = {
     "parked_min": FieldRule(0.0, 1e7, missing_ok=True,
                             hint="minutes parked since the previous trip ended; empty: "
                                  "unknown, taken as soaked to ambient"),
+    "duration_s": FieldRule(0.0, 1e6, missing_ok=True,
+                            hint="the trip's duration in seconds; with start_time it ends the "
+                                 "trip for the next trip's parking time"),
 }
 
 
@@ -230,7 +233,9 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     (minutes the car stood parked since its previous trip ended: a short stop
     leaves the cabin warm, :func:`hybridev.physics.thermal.soak_fraction`;
     empty means unknown, taken as soaked to ambient; see
-    :func:`hybridev.parked_minutes` to derive it from start times).
+    :func:`hybridev.parked_minutes` to derive it from start times),
+    ``duration_s`` [0, 1e6] or empty (ends the trip for the next trip's
+    parking time).
 
     Parameters
     ----------

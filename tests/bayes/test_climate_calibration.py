@@ -8,6 +8,7 @@ import pytest
 from hybridev import VehicleParams, make_trips
 from hybridev.bayes.priors import CLIMATE_PARAMS, PhysicsPrior
 from hybridev.bayes.sampler import _group_codes, calibrate_physics, simulate_measured
+from hybridev.physics.stats import energy_from_stats
 
 # an illustrative compact car, not any data set's
 CAR = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
@@ -173,3 +174,80 @@ def test_auto_groups_fall_back_to_the_day_of_start_time():
     assert auto_group_labels(t).astype(str).tolist() == ["2025-01-13", "2025-01-13",
                                                          "2025-02-06"]  # day first
     assert auto_group_column(t.assign(date=["a", "a", "b"])) == "date"
+
+
+def test_posterior_recovers_a_planted_heating_onset():
+    """The truth starts heating 8 K below the default balance point (a driver dressed for
+    the weather); the posterior's 99 % interval holds 8 K, its median is closer to 8 than
+    to the nominal 0, and the heating scale stays near the truth's 1 (tolerance: 99 %
+    credible interval; 3 % noise, 300 trips at -15 to 35 degC)."""
+    truth = {"heating_offset_k": 8.0}
+    m = simulate_measured(_trips(300, 3), CAR, true_params=truth, noise_rel=0.03, seed=4)
+    post = _calibrate(m, params=("aux_base_kw",), groups=None)
+    s = post.summary(level=0.99)
+    assert s.loc["heating_offset_k", "q05"] <= 8.0 <= s.loc["heating_offset_k", "q95"]
+    assert abs(s.loc["heating_offset_k", "median"] - 8.0) < 4.0
+    assert s.loc["heating_scale", "q05"] <= 1.0 <= s.loc["heating_scale", "q95"]
+    assert post.prior_check()["inside"].all()
+
+
+def test_a_mild_weather_car_that_barely_heats_keeps_a_physical_heating_slope():
+    """Logged at 4-16 degC by a driver who heats only below ~6 degC (offset 11 K): the
+    posterior explains the little heating by a late onset, not by a tiny heating scale,
+    so a -15 degC trip is predicted within 20 % of the truth's energy (with the scale
+    alone, the calibration extrapolated about a tenth of the heating to the cold)."""
+    truth = {"heating_offset_k": 11.0}
+    trips = _trips(200, 5)
+    trips["temperature_c"] = np.random.default_rng(6).uniform(4.0, 16.0, len(trips))
+    m = simulate_measured(trips, CAR, true_params=truth, noise_rel=0.03, seed=7)
+    post = _calibrate(m, params=("aux_base_kw",), groups=None)
+    assert post.median()["heating_scale"] > 0.25
+    cold = make_trips(40, seed=8).assign(temperature_c=-15.0)
+    true_cold = simulate_measured(cold, CAR, true_params=truth, noise_rel=0.0)["energy_kwh"]
+    pred = energy_from_stats(post.stats_for(cold),
+                             {k: v for k, v in post.median().items() if k != "noise_rel"})
+    assert abs(pred.sum() / true_cold.sum() - 1.0) < 0.20
+
+
+def test_band_preset_calibration_has_no_heating_onset():
+    m = simulate_measured(_trips(60, 9), VehicleParams(), noise_rel=0.03, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        post = calibrate_physics(m, VehicleParams(), params=("aux_base_kw",), n_steps=200,
+                                 climate_params=True, groups=None)
+    assert "heating_offset_k" not in post.param_names
+    assert "heating_scale" in post.param_names
+
+
+def test_heating_onset_prior_is_narrow_below_and_wide_above():
+    """Split normal (sd 2 K below the nominal onset, 5 K above): an earlier onset needs a
+    warmer set point, a later one only clothing or sun. Its 99 % range is the split
+    normal's exact quantiles (checked against 2 million draws to 0.05 K)."""
+    from hybridev.bayes.checks import prior_check
+    from hybridev.bayes.likelihood import _LogPosterior
+    from hybridev.bayes.posterior import PhysicsPosterior
+    from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
+    from hybridev.physics.stats_build import trip_stats
+
+    pr = PhysicsPrior()
+    kind, c, sd, lo, hi = pr.spec("heating_offset_k", 0.0, REGEN_EFFICIENCY_MAX)
+    assert (kind, c, sd, lo, hi) == ("splitnormal", 0.0, (2.0, 5.0), -10.0, 20.0)
+    post = PhysicsPosterior(["heating_offset_k"], [[12.0], [13.0]], [0.05, 0.05], vehicle=CAR)
+    row = prior_check(post).loc["heating_offset_k"]
+    rng = np.random.default_rng(0)
+    z = np.abs(rng.standard_normal(2_000_000))
+    x = np.where(rng.random(z.size) < 2.0 / 7.0, -2.0 * z, 5.0 * z)
+    q = np.quantile(x, [0.005, 0.995])
+    assert row["prior_lo"] == pytest.approx(q[0], abs=0.05)
+    assert row["prior_hi"] == pytest.approx(q[1], abs=0.05)
+    assert bool(row["inside"])  # 12.5 K later: inside; 6 K earlier would not be
+    post = PhysicsPosterior(["heating_offset_k"], [[-6.0]], [0.05], vehicle=CAR)
+    assert not bool(prior_check(post).loc["heating_offset_k", "inside"])
+    m = simulate_measured(_trips(20, 11), CAR, noise_rel=0.03, seed=1)
+    lp = _LogPosterior(trip_stats(m, CAR, n_steps=100), m["energy_kwh"].to_numpy(),
+                       ["heating_offset_k"], [pr.spec("heating_offset_k", 0.0, 1.0)], pr,
+                       {})
+    theta = np.array([[-4.0, np.log(0.05)], [0.0, np.log(0.05)], [4.0, np.log(0.05)]])
+    p = lp.log_prior(theta)
+    assert p[0] - p[1] == pytest.approx(-0.5 * (4.0 / 2.0) ** 2)
+    assert p[2] - p[1] == pytest.approx(-0.5 * (4.0 / 5.0) ** 2)

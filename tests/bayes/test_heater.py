@@ -54,6 +54,19 @@ def test_selects_the_true_heater_in_both_seasons(kind):
         assert 30 <= sel.n_eff <= 120
 
 
+def test_a_late_heating_onset_is_not_taken_for_a_heat_pump():
+    """A PTC car whose driver heats only 8 K below the default balance point draws
+    relatively less in mild weather, like a heat pump; with the onset integrated over its
+    prior in both candidates' likelihoods, PTC is kept on 3 seeds (with a fixed onset the
+    heat pump won on such trips)."""
+    for seed in range(3):
+        truth = dataclasses.replace(CAR, heater_kind="ptc", heating_offset_k=8.0)
+        m = simulate_measured(_trips(120, seed), truth, noise_rel=0.02, seed=seed + 1,
+                              n_steps=200)
+        sel = _select(m, groups=np.arange(120) // 4)
+        assert sel.kind == "ptc", (seed, sel)
+
+
 def test_summer_only_trips_keep_the_ptc_default():
     """No trip below the heating balance point: no heating signal, ln B ~ 0, PTC kept
     even when the truth is a heat pump."""

@@ -64,6 +64,29 @@ def test_validation_allows_empty_but_not_negative_or_text():
         validate_trips(base.assign(parked_min=["soon", 0.0, 1.0]))
 
 
+def test_a_negative_or_text_duration_is_refused_not_ignored():
+    """A duration ends the trip for the next trip's parking time: a bad one is an error
+    naming the field and its range (predict tables), or a reported rejected row (measured
+    trips), never silently replaced by distance / speed."""
+    base = make_trips(3, seed=1)
+    assert len(validate_trips(base.assign(duration_s=[np.nan, 0.0, 600.0]))) == 3
+    with pytest.raises(ValueError, match=r"duration_s.*-60.*\[0, 1e\+06\] or empty"):
+        validate_trips(base.assign(duration_s=[-60.0, 600.0, 600.0]))
+    with pytest.raises(ValueError, match="duration_s"):
+        validate_trips(base.assign(duration_s=["00:10:00", 600.0, 600.0]))
+    trips = pd.DataFrame({"trip_id": ["a", "b"], "temperature_c": [5.0, 5.0],
+                          "soc_initial": [0.8, 0.7], "energy_kwh": [1.0, 0.5],
+                          "duration_s": [-600.0, 300.0]})
+    ts = pd.DataFrame({"trip_id": ["a"] * 601 + ["b"] * 301,
+                       "t_s": list(range(601)) + list(range(301)), "speed_kmh": [40.0] * 902})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = measured_from_frames(trips, ts, VehicleParams.from_coastdown(150.0, 0.5, 0.03,
+                                                                         1700.0))
+    assert list(m.trips["trip_id"]) == ["b"]
+    assert (m.rejected["field"] == "duration_s").any()
+
+
 def test_measured_from_frames_derives_parking_time_from_trace_durations():
     trips = pd.DataFrame({"trip_id": ["a", "b"], "temperature_c": [-5.0, -5.0],
                           "soc_initial": [0.8, 0.7], "energy_kwh": [1.0, 0.5],
