@@ -136,9 +136,8 @@ def _winter_text(w: dict, balance_c: float, no_prior: list) -> str:
     return f"""This car barely heats at 5-15 °C. With a heating *scale* alone the calibration
 can only say "this car heats little" and carries that to every temperature: a scale of
 {so['heating_scale']:.2g} of the modelled heating, at -15 °C too ({inside} its prior's
-99 % range). The heating *onset* (`heating_offset_k`, a split-normal prior with sd 2 K earlier and 5 K later) says
-instead "this
-driver starts heating later": the posterior puts the onset {on['heating_offset_k']:.1f} K
+99 % range). The heating *onset* (`heating_offset_k`, a split-normal prior with sd
+2 K earlier and 5 K later) says instead "this driver starts heating later": the posterior puts the onset {on['heating_offset_k']:.1f} K
 below the default balance point (heating from about {balance_c - on['heating_offset_k']:.0f}
 °C instead of {balance_c:.1f} °C) with a heating scale of {on['heating_scale']:.2g}, whose
 wide credible interval (table above) is mostly the prior's: trips at 5-15 °C say little
@@ -147,8 +146,8 @@ about the heat a cabin needs at -15 °C. The data alone agree: fitted without an
 of {np_scale:.2f}.
 
 What that means in winter, for a user who calibrated on these trips: the same
-{w['n_trips']} trips and 1 Hz traces replayed at {w['temperature_c']:g} °C (soaked cabin
-as logged, parking times kept). Nothing here is measured (the car was never logged in
+{w['n_trips']} trips and 1 Hz traces replayed at {w['temperature_c']:g} °C (parking times
+as logged). Nothing here is measured (the car was never logged in
 the cold); the anchors are the dynamometer ratios of the table below (a Nissan Leaf on
 the city cycle: 2.0 at -6.7 °C).
 
