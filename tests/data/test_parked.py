@@ -12,6 +12,8 @@ from hybridev.data.logs import measured_from_frames
 from hybridev.data.parked import MAX_PARKED_MIN, with_parked_minutes
 from hybridev.physics.validation import validate_trips
 
+VEHICLE = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)  # an illustrative car
+
 
 def test_gaps_follow_start_order_per_vehicle_and_clip_at_zero():
     t = pd.DataFrame({
@@ -74,30 +76,27 @@ def test_a_negative_or_text_duration_is_refused_not_ignored():
         validate_trips(base.assign(duration_s=[-60.0, 600.0, 600.0]))
     with pytest.raises(ValueError, match="duration_s"):
         validate_trips(base.assign(duration_s=["00:10:00", 600.0, 600.0]))
-    trips = pd.DataFrame({"trip_id": ["a", "b"], "temperature_c": [5.0, 5.0],
-                          "soc_initial": [0.8, 0.7], "energy_kwh": [1.0, 0.5],
-                          "duration_s": [-600.0, 300.0]})
-    ts = pd.DataFrame({"trip_id": ["a"] * 601 + ["b"] * 301,
-                       "t_s": list(range(601)) + list(range(301)), "speed_kmh": [40.0] * 902})
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        m = measured_from_frames(trips, ts, VehicleParams.from_coastdown(150.0, 0.5, 0.03,
-                                                                         1700.0))
+    m = _two_logged_trips(temperature_c=[5.0, 5.0], duration_s=[-600.0, 300.0])
     assert list(m.trips["trip_id"]) == ["b"]
     assert (m.rejected["field"] == "duration_s").any()
 
 
-def test_measured_from_frames_derives_parking_time_from_trace_durations():
-    trips = pd.DataFrame({"trip_id": ["a", "b"], "temperature_c": [-5.0, -5.0],
-                          "soc_initial": [0.8, 0.7], "energy_kwh": [1.0, 0.5],
-                          "start_time": ["2024-01-05 08:00:00", "2024-01-05 08:15:00"]})
+def _two_logged_trips(**cols):
+    """Trips "a" (10 min) and "b" (5 min) at 40 km/h with 1 Hz traces, read as measured."""
+    trips = pd.DataFrame({"trip_id": ["a", "b"], "soc_initial": [0.8, 0.7],
+                          "energy_kwh": [1.0, 0.5], **cols})
     ts = pd.DataFrame({"trip_id": ["a"] * 601 + ["b"] * 301,
                        "t_s": list(range(601)) + list(range(301)),
                        "speed_kmh": [40.0] * 902})
-    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m = measured_from_frames(trips, ts, v)
+        return measured_from_frames(trips, ts, VEHICLE)
+
+
+def test_measured_from_frames_derives_parking_time_from_trace_durations():
+    v = VEHICLE
+    m = _two_logged_trips(temperature_c=[-5.0, -5.0],
+                          start_time=["2024-01-05 08:00:00", "2024-01-05 08:15:00"])
     assert np.isnan(m.trips["parked_min"].iloc[0]) and m.trips["parked_min"].iloc[1] == 5.0
     # the second trip starts with a warm cabin: less physics energy than soaked
     e = simulate(m.trips.assign(mode="normal"), v).energy_kwh_physics.to_numpy()
