@@ -57,25 +57,23 @@ def test_unreadable_start_times_warn_with_count_and_stay_unknown():
     assert np.isnan(p.iloc[1]) and p.iloc[2] == 50.0
 
 
-def test_validation_allows_empty_but_not_negative_or_text():
+@pytest.mark.parametrize("field, ok, negative, text, allowed", [
+    ("parked_min", 30.0, -5.0, "soon", r"\[0, 1e\+07\] or empty"),
+    # a duration ends the trip for the next trip's parking time: a bad one is refused,
+    # never silently replaced by distance / speed
+    ("duration_s", 600.0, -60.0, "00:10:00", r"\[0, 1e\+06\] or empty"),
+])
+def test_validation_allows_empty_but_not_negative_or_text(field, ok, negative, text, allowed):
     base = make_trips(3, seed=1)
-    assert len(validate_trips(base.assign(parked_min=[np.nan, 0.0, 30.0]))) == 3
-    with pytest.raises(ValueError, match=r"parked_min.*-5.*\[0, 1e\+07\] or empty"):
-        validate_trips(base.assign(parked_min=[-5.0, 0.0, 1.0]))
-    with pytest.raises(ValueError, match="parked_min"):
-        validate_trips(base.assign(parked_min=["soon", 0.0, 1.0]))
+    assert len(validate_trips(base.assign(**{field: [np.nan, 0.0, ok]}))) == 3
+    with pytest.raises(ValueError, match=rf"{field}.*{negative:g}.*{allowed}"):
+        validate_trips(base.assign(**{field: [negative, 0.0, ok]}))
+    with pytest.raises(ValueError, match=field):
+        validate_trips(base.assign(**{field: [text, 0.0, ok]}))
 
 
-def test_a_negative_or_text_duration_is_refused_not_ignored():
-    """A duration ends the trip for the next trip's parking time: a bad one is an error
-    naming the field and its range (predict tables), or a reported rejected row (measured
-    trips), never silently replaced by distance / speed."""
-    base = make_trips(3, seed=1)
-    assert len(validate_trips(base.assign(duration_s=[np.nan, 0.0, 600.0]))) == 3
-    with pytest.raises(ValueError, match=r"duration_s.*-60.*\[0, 1e\+06\] or empty"):
-        validate_trips(base.assign(duration_s=[-60.0, 600.0, 600.0]))
-    with pytest.raises(ValueError, match="duration_s"):
-        validate_trips(base.assign(duration_s=["00:10:00", 600.0, 600.0]))
+def test_a_negative_duration_is_a_reported_rejected_row():
+    """Measured trips: the row is rejected and reported, not read with distance / speed."""
     m = _two_logged_trips(temperature_c=[5.0, 5.0], duration_s=[-600.0, 300.0])
     assert list(m.trips["trip_id"]) == ["b"]
     assert (m.rejected["field"] == "duration_s").any()
