@@ -15,8 +15,9 @@ import numpy as np
 from hybridev import VehicleParams, trace_energy_kwh
 from hybridev.physics.params import LOGGED_PROFILE
 
-__all__ = ["BATTERY_HEAT_WHATIF", "COMPACT", "PUBLISHED", "TOLERANCE", "curve_table", "cycle",
-           "diagnosis_minus15", "sensitivity"]
+__all__ = ["BATTERY_HEAT_WHATIF", "CITY_DISTANCE_SHARE", "COMBINED_MIN", "COMPACT", "PUBLISHED",
+           "TOLERANCE", "city_distance_share", "combined_before_revision", "curve_table",
+           "cycle", "diagnosis_minus15", "mixed", "sensitivity"]
 
 COMPACT = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)
 """An illustrative compact BEV (coast-down A/B/C of the size class, 1,700 kg test mass)."""
@@ -60,31 +61,90 @@ def _phase(v_kmh: float, accel_s: float, cruise_s: float, brake_s: float, stop_s
                            np.linspace(v, 0, int(brake_s) + 1)[1:], np.zeros(int(stop_s))])
 
 
-def cycle(kind: str, minutes: float | None = None) -> np.ndarray:
-    """A 1 Hz speed trace (m/s) of a city, highway or combined drive.
+CITY_DISTANCE_SHARE = 0.55
+"""Share of the combined cycle's *distance* driven in the city. The EPA's combined rating
+weights the city (UDDS) and highway (HWFET) consumption per distance 55/45
+(40 CFR 600.210: combined = 1 / (0.55 / city + 0.45 / highway) in distance per energy),
+and SAE J1634 combined ranges, which the AAA tests report, use the same weights; Geotab
+expresses its fleet's range as a share of that rated (combined) range."""
 
-    City: stop-and-go to 30-55 km/h (about 28 km/h mean, like the UDDS);
-    highway: ramps and cruise at 80-110 km/h (about 78 km/h mean, like the
-    HWFET); combined (also used for the fleet-average Geotab points): city then
-    highway, 55/45 by time; ``"wltc"``: see :func:`wltc_like`. ``minutes`` repeats
-    or cuts the pattern to that duration.
-    """
-    if kind == "wltc":
-        return wltc_like()
+COMBINED_MIN = 52.0
+"""Duration of the combined trip, minutes."""
+
+
+def _patterns() -> tuple[np.ndarray, np.ndarray]:
+    """One repeat of the city and of the highway speed pattern, 1 Hz, m/s."""
     city = np.concatenate([_phase(v, a, c, b, s) for v, a, c, b, s in
                            ((35, 8, 30, 6, 15), (50, 12, 45, 9, 20), (30, 7, 20, 6, 10),
                             (55, 14, 60, 10, 25), (40, 10, 35, 8, 18))])
     hwy = np.concatenate([_phase(100, 25, 240, 0, 0), np.full(120, 110 / 3.6),
                           np.linspace(110, 80, 31)[1:] / 3.6, np.full(200, 80 / 3.6),
                           np.linspace(80, 0, 21)[1:] / 3.6, np.zeros(10)])
-    base = {"city": city, "highway": hwy}.get(kind)
+    return city, hwy
+
+
+def _km(v_mps: np.ndarray) -> float:
+    return float(np.sum(0.5 * (v_mps[1:] + v_mps[:-1]))) / 1000.0
+
+
+def _split(minutes: float, city_share: float, by: str) -> tuple[np.ndarray, np.ndarray]:
+    city, hwy = _patterns()
+    if by == "distance":
+        vc, vh = _km(city) / len(city), _km(hwy) / len(hwy)  # km per second of pattern
+        t_share = (city_share / vc) / (city_share / vc + (1.0 - city_share) / vh)
+    elif by == "time":
+        t_share = city_share
+    else:
+        raise ValueError(f"by={by!r}; allowed: distance, time")
+    n = int(minutes * 60)
+    n_c = round(t_share * n)
+    return np.resize(city, n_c), np.resize(hwy, n - n_c)
+
+
+def mixed(minutes: float, city_share: float = CITY_DISTANCE_SHARE, *,
+          by: str = "distance") -> np.ndarray:
+    """City then highway over ``minutes``, 1 Hz, m/s, with ``city_share`` of the
+    distance (``by="distance"``, the EPA's combined weighting) or of the time
+    (``by="time"``) in the city."""
+    return np.concatenate(_split(minutes, city_share, by))
+
+
+def city_distance_share(minutes: float = COMBINED_MIN, city_share: float = CITY_DISTANCE_SHARE,
+                        *, by: str = "distance") -> float:
+    """Share of the distance of :func:`mixed`'s trace driven in its city part."""
+    c, h = _split(minutes, city_share, by)
+    return _km(c) / (_km(c) + _km(h))
+
+
+def combined_before_revision() -> np.ndarray:
+    """The combined cycle of this evaluation before the 2026-11-26 revision: five city
+    patterns then two highway patterns (about 55/45 *by time*, 52 min; 31 % of the
+    distance in the city), kept to report what the revision changed."""
+    city, hwy = _patterns()
+    c = np.tile(city, 5)
+    return np.concatenate([c, np.tile(hwy, max(1, round(0.45 / 0.55 * len(c) / len(hwy))))])
+
+
+def cycle(kind: str, minutes: float | None = None) -> np.ndarray:
+    """A 1 Hz speed trace (m/s) of a city, highway or combined drive.
+
+    City: stop-and-go to 30-55 km/h (about 29 km/h mean, like the UDDS);
+    highway: ramps and cruise at 80-110 km/h (about 90 km/h mean, like the
+    HWFET); combined (also used for the fleet-average Geotab points): city then
+    highway, :data:`CITY_DISTANCE_SHARE` of the distance in the city (:func:`mixed`),
+    :data:`COMBINED_MIN` minutes; ``"wltc"``: see :func:`wltc_like`. ``minutes`` repeats
+    or cuts the pattern to that duration.
+    """
+    if kind == "wltc":
+        return wltc_like()
     if kind.startswith("combined"):
-        c = np.tile(city, 5)
-        base = np.concatenate([c, np.tile(hwy, max(1, round(0.45 / 0.55 * len(c) / len(hwy))))])
+        return mixed(COMBINED_MIN if minutes is None else minutes)
+    city, hwy = _patterns()
+    base = {"city": city, "highway": hwy}.get(kind)
     if base is None:
-        raise ValueError(f"kind={kind!r}; allowed: city, highway, combined")
+        raise ValueError(f"kind={kind!r}; allowed: city, highway, combined, wltc")
     if minutes is None:
-        minutes = {"city": 23.0, "highway": 13.0}.get(kind, len(base) / 60)
+        minutes = {"city": 23.0, "highway": 13.0}[kind]
     n = int(minutes * 60) + 1
     return np.resize(base, n) if n > len(base) else base[:n]
 
@@ -123,8 +183,7 @@ def energy_per_km(v_mps: np.ndarray, temperature_c, vehicle: VehicleParams = COM
     traces = np.broadcast_to(v_mps, (len(t), len(v_mps)))
     e = trace_energy_kwh(traces, 1.0, vehicle=vehicle, profile=LOGGED_PROFILE,
                          temperature_c=t)
-    km = float(np.sum(0.5 * (v_mps[1:] + v_mps[:-1]))) / 1000.0
-    return e / km
+    return e / _km(v_mps)
 
 
 def _no_hvac(v: VehicleParams) -> VehicleParams:
@@ -132,12 +191,17 @@ def _no_hvac(v: VehicleParams) -> VehicleParams:
                                cabin_heat_capacity_kj_per_k=0.0)
 
 
-def curve_table(vehicle: VehicleParams = COMPACT) -> list[dict]:
-    """Model against each published point: ratio, error, matched."""
+def curve_table(vehicle: VehicleParams = COMPACT, combined: np.ndarray | None = None
+                ) -> list[dict]:
+    """Model against each published point: ratio, error, matched.
+
+    ``combined`` (optional) replaces the combined cycle's trace (m/s, 1 Hz).
+    """
     rows = []
     for src, kind, t, t_ref, ratio, how in PUBLISHED:
         veh = _no_hvac(vehicle) if kind.endswith("no_hvac") else vehicle
-        e = energy_per_km(cycle(kind), [t, t_ref], veh)
+        v = combined if (combined is not None and kind.startswith("combined")) else cycle(kind)
+        e = energy_per_km(v, [t, t_ref], veh)
         model = float(e[0] / e[1])
         rows.append({"source": src, "cycle": kind, "temperature_c": t, "reference_c": t_ref,
                      "published_ratio": ratio, "model_ratio": model,
@@ -153,29 +217,24 @@ BATTERY_HEAT_WHATIF = {"battery_warmup_kwh_per_k": 0.1, "battery_heat_below_c": 
 do not publish it)."""
 
 
-def _mixed(minutes: float) -> np.ndarray:
-    """City then highway, 55/45 by time, over ``minutes`` (the combined cycle's mix)."""
-    n_c, n_h = int(0.55 * minutes * 60), int(0.45 * minutes * 60)
-    return np.concatenate([np.resize(cycle("city"), n_c), np.resize(cycle("highway"), n_h)])
-
-
 def _ratio(v_mps, t, t_ref, vehicle) -> float:
     e = energy_per_km(v_mps, [t, t_ref], vehicle)
     return float(e[0] / e[1])
 
 
 def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
-    """Why the Geotab point at -15 degC is missed: what the comparison and candidate
-    physics change.
+    """The Geotab point at -15 degC: what the comparison and candidate physics change.
 
-    Returns the model ratio (-15 vs 21.5 degC, and 10 vs 21.5 degC) for trips of 10 to
+    Returns the combined cycle's share of distance in the city now and before the
+    2026-11-26 revision (:func:`combined_before_revision`) with the combined points'
+    rows under the old cycle; the model ratio (-15 vs 21.5 degC, and 10 vs 21.5 degC) for trips of 10 to
     52 minutes at the combined cycle's city/highway mix and for a city-only trip; the
     number of published points matched with the battery-heating what-if
     (:data:`BATTERY_HEAT_WHATIF`) and its Geotab -15 ratio; and the ratio at -15 degC
     interpolated (log-linear in temperature) between the two WLTC dynamometer points
     (-7 and -25 degC), with the model's WLTC ratio at -15 degC.
     """
-    by_len = {m: (_ratio(_mixed(m), -15.0, 21.5, vehicle), _ratio(_mixed(m), 10.0, 21.5, vehicle))
+    by_len = {m: (_ratio(mixed(m), -15.0, 21.5, vehicle), _ratio(mixed(m), 10.0, 21.5, vehicle))
               for m in (10, 20, 30, 52)}
     city = _ratio(cycle("city"), -15.0, 21.5, vehicle)
     bat = dataclasses.replace(vehicle, **BATTERY_HEAT_WHATIF)
@@ -184,7 +243,16 @@ def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
     dyno = [r for r in PUBLISHED if r[1] == "wltc"]
     (t1, _, r1), (t2, _, r2) = ((r[2], r[3], r[4]) for r in dyno)
     interp = float(np.exp(np.log(r1) + (np.log(r2) - np.log(r1)) * (-15.0 - t1) / (t2 - t1)))
-    return {"by_length": by_len, "city_23min": city,
+    before = [r for r in curve_table(vehicle, combined_before_revision())
+              if r["cycle"].startswith("combined")]
+    old = combined_before_revision()
+    n_c = 5 * len(_patterns()[0])
+    return {"combined_city_distance_share": city_distance_share(),
+            "combined_before": {"city_distance_share": _km(old[:n_c + 1]) / _km(old),
+                                "minutes": len(old) / 60.0, "rows": before,
+                                "n_matched_all": sum(r["matched"] for r in curve_table(
+                                    vehicle, old))},
+            "by_length": by_len, "city_23min": city,
             "battery_heating": {"n_matched": sum(r["matched"] for r in rows), "n": len(rows),
                                 "geotab_minus15": geo["model_ratio"],
                                 "failed": [f"{r['source'].split(' (')[0]} {r['cycle']} "
