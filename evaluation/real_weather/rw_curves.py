@@ -243,15 +243,16 @@ def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
     dyno = [r for r in PUBLISHED if r[1] == "wltc"]
     (t1, _, r1), (t2, _, r2) = ((r[2], r[3], r[4]) for r in dyno)
     interp = float(np.exp(np.log(r1) + (np.log(r2) - np.log(r1)) * (-15.0 - t1) / (t2 - t1)))
-    before = [r for r in curve_table(vehicle, combined_before_revision())
-              if r["cycle"].startswith("combined")]
     old = combined_before_revision()
+    old_rows = curve_table(vehicle, old)
+    before = [r for r in old_rows if r["cycle"].startswith("combined")]
     n_c = 5 * len(_patterns()[0])
     return {"combined_city_distance_share": city_distance_share(),
             "combined_before": {"city_distance_share": _km(old[:n_c + 1]) / _km(old),
                                 "minutes": len(old) / 60.0, "rows": before,
-                                "n_matched_all": sum(r["matched"] for r in curve_table(
-                                    vehicle, old))},
+                                "n_matched_all": sum(r["matched"] for r in old_rows),
+                                "mean_abs_error": float(np.mean([abs(r["rel_error"])
+                                                                 for r in old_rows]))},
             "by_length": by_len, "city_23min": city,
             "battery_heating": {"n_matched": sum(r["matched"] for r in rows), "n": len(rows),
                                 "geotab_minus15": geo["model_ratio"],

@@ -379,7 +379,8 @@ and highway consumption 55/45 per unit *distance* (40 CFR 600.210: combined =
 cycle used to mix city and highway about 55/45 by *time*
 ({dg['combined_before']['minutes']:.0f} min), which puts only {dg['combined_before']['city_distance_share']:.0%} of the distance in the
 city: a different cycle from the one the studies report. With it
-{dg['combined_before']['n_matched_all']} of {len(cur)} points were matched; the combined points read
+{dg['combined_before']['n_matched_all']} of {len(cur)} points were matched (mean absolute error
+{dg['combined_before']['mean_abs_error'] * 100:.1f} %); the combined points read
 (`rw_curves.combined_before_revision`):
 
 {_md_table(["source", "cycle", "T (°C)", "published", "model, 55/45 by time", "error",
