@@ -387,7 +387,7 @@ city: a different cycle from the one the studies report. With it
             "model, 55/45 by distance", "error"], before_rows)}
 
 Closer to the measurement with the revision: {_moved(dg, now, True)}; further from it:
-{_moved(dg, now, False)}. The remaining checks on the fleet point at -15 °C, the loosest of the cold points
+{_moved(dg, now, False)}. The other checks on the fleet point at -15 °C, which the old cycle missed
 (`rw_curves.diagnosis_minus15`):
 
 * *Trip length matters little.* At the combined mix the model's
