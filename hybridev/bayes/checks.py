@@ -11,11 +11,34 @@ import pandas as pd
 from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX, PhysicsPrior
 from hybridev.core.errors import CalibrationWarning
 
-__all__ = ["BOUND_TOL", "prior_check", "warn_unphysical"]
+__all__ = ["BOUND_TOL", "UNPHYSICAL_HINTS", "prior_check", "warn_unphysical"]
 
 BOUND_TOL = 0.01
 """Relative distance to a hard bound within which a posterior tail counts as pressed
 against it (:func:`prior_check`'s ``at_bound``)."""
+
+
+UNPHYSICAL_HINTS = {
+    ("heating_offset_k", "above"): (
+        "a late heating onset: the driver heats little in mild weather (seat heating, "
+        "clothing, sun) or the car's heat pump is more efficient in mild weather than "
+        "hybridev.physics.thermal.heat_pump_cop"),
+    ("heating_offset_k", "below"): "heating from warmer weather than modelled (a warmer set point)",
+    ("heating_scale", "below"): (
+        "little cabin heating: seat heating instead of air heating, or a heat pump the "
+        "calibration took for a PTC heater (declare heater_kind='heat_pump' if the car has one)"),
+    ("heating_scale", "above"): (
+        "more heating than modelled: a warmer set point, battery heating, or a PTC heater "
+        "declared as a heat pump"),
+    ("warmup_scale", "above"): (
+        "a large energy at each departure: battery or cabin pre-heating from the car's own "
+        "battery, or a heat pump the calibration took for a PTC heater"),
+    ("aux_base_kw", "above"): (
+        "a constant extra load: battery conditioning, accessories, or an energy measured "
+        "at the wall (charging losses included) instead of at the battery"),
+}
+"""Physical readings of a posterior median beyond its prior's range, by parameter and
+side, appended to :func:`warn_unphysical`'s message."""
 
 
 def prior_check(post, level: float = 0.99) -> pd.DataFrame:
@@ -101,7 +124,9 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
     posterior median lies outside its prior's central ``level`` range
     (:func:`prior_check`), and the likely causes: an input in the wrong unit
     (temperatures in degF, energies in Wh, distances in miles), a wrong vehicle
-    (coast-down, mass), or something the physics does not model.
+    (coast-down, mass), or something the physics does not model, with the
+    physical reading of that parameter and side from :data:`UNPHYSICAL_HINTS`
+    where there is one.
 
     Returns
     -------
@@ -123,6 +148,8 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
     ['heating_scale']
     >>> "heating_scale 0.05 (prior 99 % range 0.127-7.85)" in str(w[0].message)
     True
+    >>> "seat heating instead of air heating" in str(w[0].message)
+    True
     """
     pc = prior_check(post, level)
     bad = pc[~pc["inside"]]
@@ -130,11 +157,15 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
         items = ", ".join(f"{name} {r['median']:.3g} (prior {100 * level:g} % range "
                           f"{r['prior_lo']:.3g}-{r['prior_hi']:.3g})"
                           for name, r in bad.iterrows())
+        hints = [f"{name}: {UNPHYSICAL_HINTS[key]}" for name, r in bad.iterrows()
+                 if (key := (name, "above" if r["median"] > r["prior_hi"] else "below"))
+                 in UNPHYSICAL_HINTS]
         warnings.warn(
             f"physics posterior: {items}: outside what the prior calls plausible, so the "
             "calibrated physics is compensating for something. Check the units of the "
             "inputs (temperature_c in degC, energy_kwh in kWh, distance_km in km, "
             "avg_speed_kmh in km/h) and the vehicle (coast-down A/B/C, mass); if they are "
             "right, the car or its driver differs from the model there (posterior_"
-            ".prior_check() has the table)", CalibrationWarning, stacklevel=stacklevel)
+            ".prior_check() has the table)" + "".join(f". Possible reading, {h}" for h in hints),
+            CalibrationWarning, stacklevel=stacklevel)
     return list(bad.index)

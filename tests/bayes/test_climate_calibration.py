@@ -8,6 +8,7 @@ import pytest
 from hybridev import VehicleParams, make_trips
 from hybridev.bayes.priors import CLIMATE_PARAMS, PhysicsPrior
 from hybridev.bayes.sampler import _group_codes, calibrate_physics, simulate_measured
+from hybridev.core.errors import CalibrationWarning
 from hybridev.physics.stats import energy_from_stats
 
 # an illustrative compact car, not any data set's
@@ -251,3 +252,24 @@ def test_heating_onset_prior_is_narrow_below_and_wide_above():
     p = lp.log_prior(theta)
     assert p[0] - p[1] == pytest.approx(-0.5 * (4.0 / 2.0) ** 2)
     assert p[2] - p[1] == pytest.approx(-0.5 * (4.0 / 5.0) ** 2)
+
+
+@pytest.mark.parametrize(("value", "side_text"), [
+    (15.0, "more efficient in mild weather"),  # a later onset than the prior's 99 %
+    (-6.0, "warmer set point"),  # an earlier one
+])
+def test_unphysical_warning_gives_the_physical_reading_of_the_side(value, side_text):
+    """The warning names the parameter's physical reading on the side it left, and says
+    nothing extra for a parameter without one (here the drag area)."""
+    from hybridev.bayes.checks import warn_unphysical
+    from hybridev.bayes.posterior import PhysicsPosterior
+
+    post = PhysicsPosterior(["heating_offset_k", "drag_area_m2"], [[value, 2.0]],
+                            [0.05], vehicle=CAR)
+    with pytest.warns(CalibrationWarning) as rec:
+        bad = warn_unphysical(post)
+    assert bad == ["heating_offset_k", "drag_area_m2"]
+    msg = str(rec[0].message)
+    assert "Possible reading, heating_offset_k: " in msg and side_text in msg
+    assert "drag_area_m2:" not in msg
+    assert msg.count("Possible reading") == 1
