@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.core.errors import ConvergenceWarning
+from hybridev.data.parked import with_parked_minutes
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, PhysicsStats, row_energy
 from hybridev.physics.stats_build import trip_stats
@@ -295,8 +296,13 @@ class PhysicsPosterior:
 
         With inferred mode weights, unlabelled trips' rows carry the posterior
         mean weights (so :func:`~hybridev.physics.stats.energy_from_stats`
-        returns the posterior-weighted mixture mean).
+        returns the posterior-weighted mixture mean). A table with a
+        ``start_time`` column and no ``parked_min`` gets the minutes parked
+        before each trip derived from its own rows
+        (:func:`hybridev.data.parked.with_parked_minutes`), as
+        :func:`~hybridev.bayes.sampler.calibrate_physics` does.
         """
+        trips = with_parked_minutes(trips, traces if hasattr(traces, "duration_s") else None)
         mm = "marginalize" if self._infer() else self.missing_mode
         st = trip_stats(trips, self.reference_vehicle, traces=traces, n_steps=self.trace_steps,
                         seed=self.trace_seed, missing_mode=mm)

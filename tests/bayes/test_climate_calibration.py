@@ -273,3 +273,22 @@ def test_unphysical_warning_gives_the_physical_reading_of_the_side(value, side_t
     assert "Possible reading, heating_offset_k: " in msg and side_text in msg
     assert "drag_area_m2:" not in msg
     assert msg.count("Possible reading") == 1
+
+
+def test_stats_for_derives_parking_time_from_start_times_as_calibration_does():
+    """``PhysicsPosterior.stats_for`` on a table with start times (and no ``parked_min``)
+    charges the warm-up the parking time leaves, as ``calibrate_physics`` saw it: a trip
+    10 min after the previous one ended pays less than a soaked one, and a given
+    ``parked_min`` is used as it is."""
+    from hybridev.bayes.posterior import PhysicsPosterior
+    from hybridev.data.parked import with_parked_minutes
+
+    t = make_trips(3, seed=2).assign(temperature_c=-5.0, distance_km=10.0, avg_speed_kmh=30.0)
+    t["start_time"] = ["2025-01-06 07:00", "2025-01-06 07:30", "2025-01-06 12:00"]
+    post = PhysicsPosterior(["heating_scale"], [[1.0]], [0.05], vehicle=CAR)
+    warm = post.stats_for(t).warmup_kwh
+    explicit = post.stats_for(with_parked_minutes(t)).warmup_kwh
+    soaked = post.stats_for(t.drop(columns="start_time")).warmup_kwh
+    np.testing.assert_allclose(warm, explicit)
+    assert warm[1] < 0.7 * soaked[1]  # 10 min parked (20-min trip from 07:00)
+    np.testing.assert_allclose(warm[[0, 2]], soaked[[0, 2]], rtol=0.02)  # first; 4 h 10 min
