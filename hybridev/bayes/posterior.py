@@ -302,7 +302,7 @@ class PhysicsPosterior:
         (:func:`hybridev.data.parked.with_parked_minutes`), as
         :func:`~hybridev.bayes.sampler.calibrate_physics` does.
         """
-        trips = with_parked_minutes(trips, traces if hasattr(traces, "duration_s") else None)
+        trips = with_parked_minutes(trips, traces)
         mm = "marginalize" if self._infer() else self.missing_mode
         st = trip_stats(trips, self.reference_vehicle, traces=traces, n_steps=self.trace_steps,
                         seed=self.trace_seed, missing_mode=mm)
