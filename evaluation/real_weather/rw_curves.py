@@ -87,32 +87,26 @@ def _km(v_mps: np.ndarray) -> float:
     return float(np.sum(0.5 * (v_mps[1:] + v_mps[:-1]))) / 1000.0
 
 
-def _split(minutes: float, city_share: float, by: str) -> tuple[np.ndarray, np.ndarray]:
+def _split(minutes: float, city_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """City and highway parts of :func:`mixed`: ``city_share`` of the distance in the city."""
     city, hwy = _patterns()
-    if by == "distance":
-        vc, vh = _km(city) / len(city), _km(hwy) / len(hwy)  # km per second of pattern
-        t_share = (city_share / vc) / (city_share / vc + (1.0 - city_share) / vh)
-    elif by == "time":
-        t_share = city_share
-    else:
-        raise ValueError(f"by={by!r}; allowed: distance, time")
+    vc, vh = _km(city) / len(city), _km(hwy) / len(hwy)  # km per second of pattern
+    t_share = (city_share / vc) / (city_share / vc + (1.0 - city_share) / vh)
     n = int(minutes * 60)
     n_c = round(t_share * n)
     return np.resize(city, n_c), np.resize(hwy, n - n_c)
 
 
-def mixed(minutes: float, city_share: float = CITY_DISTANCE_SHARE, *,
-          by: str = "distance") -> np.ndarray:
+def mixed(minutes: float, city_share: float = CITY_DISTANCE_SHARE) -> np.ndarray:
     """City then highway over ``minutes``, 1 Hz, m/s, with ``city_share`` of the
-    distance (``by="distance"``, the EPA's combined weighting) or of the time
-    (``by="time"``) in the city."""
-    return np.concatenate(_split(minutes, city_share, by))
+    distance in the city (the EPA's combined weighting)."""
+    return np.concatenate(_split(minutes, city_share))
 
 
-def city_distance_share(minutes: float = COMBINED_MIN, city_share: float = CITY_DISTANCE_SHARE,
-                        *, by: str = "distance") -> float:
+def city_distance_share(minutes: float = COMBINED_MIN,
+                        city_share: float = CITY_DISTANCE_SHARE) -> float:
     """Share of the distance of :func:`mixed`'s trace driven in its city part."""
-    c, h = _split(minutes, city_share, by)
+    c, h = _split(minutes, city_share)
     return _km(c) / (_km(c) + _km(h))
 
 
