@@ -467,3 +467,84 @@ def test_evaluate_charging_on_given_scenarios(base_plan):
     for bad in (np.ones((50, 6)), np.ones((200, 5)), np.full((200, 6), np.nan)):
         with pytest.raises(ValueError, match="energy scenarios of shape"):
             evaluate_charging(x, bad, 60.0, sched, **args)
+
+
+# -- parking time between planned trips --------------------------------------------------
+def test_schedule_parked_minutes_are_the_gaps_in_departure_order():
+    from hybridev.apps.charging.schedule import model_trip_table, schedule_parked_minutes
+
+    # rows out of order; 30 min trips (duration_h); gaps 10 min, then 3 days (capped at a week)
+    sched = schedule([80.0, 8.0, 8.0 + 40.0 / 60.0], 20.0).assign(duration_h=0.5)
+    prob = parse_problem(sched, tariff(days=5), soc_now=0.5, capacity_kwh=60.0)
+    got = schedule_parked_minutes(prob)
+    assert np.isnan(got[0])
+    np.testing.assert_allclose(got[1:], [10.0, (80.0 - 8.0 - 40.0 / 60.0 - 0.5) * 60.0])
+    assert "parked_min" not in model_trip_table(prob).columns
+    table = model_trip_table(prob, parking=True)
+    np.testing.assert_allclose(table["parked_min"].to_numpy(), got, equal_nan=True)
+    # a week's cap
+    far = parse_problem(schedule([0.0, 24.0 * 9], 20.0), tariff(days=10), soc_now=0.5,
+                        capacity_kwh=60.0)
+    assert schedule_parked_minutes(far)[1] == 7 * 24 * 60.0
+    # a given column is used as given, and reaches the plan's trips
+    given = model_trip_table(parse_problem(sched.assign(parked_min=[5.0, np.nan, 1.0]),
+                                           tariff(days=5), soc_now=0.5, capacity_kwh=60.0),
+                             parking=True)
+    np.testing.assert_allclose(given["parked_min"].to_numpy(), [np.nan, 1.0, 5.0],
+                               equal_nan=True)
+    with pytest.raises(ValueError, match="parked_min"):
+        parse_problem(sched.assign(parked_min=-3.0), tariff(days=5), soc_now=0.5,
+                      capacity_kwh=60.0)
+
+
+def test_plan_gives_parking_time_only_to_a_model_whose_fit_saw_it():
+    sched = schedule(TWO_DAYS, 5.0 * ENERGY)
+    args = dict(soc_now=0.3, tariff=tariff(), charger_kw=7.0, n_samples=S, n_eval=N,
+                soc_refine=0)
+    without = _SocModel()
+    plan_charging(without, sched, **args)
+    assert "parked_min" not in without.calls[0].columns
+    saw = _SocModel()
+    saw.fit_info_ = {"parking": {"n_known": 12, "n_short_stop": 3}}
+    p = plan_charging(saw, sched, **args)
+    pk = saw.calls[0]["parked_min"].to_numpy()
+    dur_h = 5.0 * ENERGY / 50.0
+    expect = np.r_[np.nan, 60.0 * (np.diff(TWO_DAYS) - dur_h[:-1])]
+    np.testing.assert_allclose(pk, expect, equal_nan=True)
+    np.testing.assert_allclose(p.trips["parked_min"].to_numpy(), expect, equal_nan=True)
+    none_known = _SocModel()
+    none_known.fit_info_ = {"parking": {"n_known": 0, "n_short_stop": 0}}
+    plan_charging(none_known, sched, **args)
+    assert "parked_min" not in none_known.calls[0].columns
+
+
+def test_plan_after_a_short_stop_predicts_the_warm_cabin_like_predict():
+    """A model fitted with start times plans a trip 10 min after the last one with a partial warm-up."""
+    from hybridev import HybridModel, VehicleParams, make_trips, parked_minutes, simulate
+    from hybridev.learning.model import PAPER_CONFIG
+
+    v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
+    t = make_trips(24, seed=9).assign(temperature_c=-8.0)
+    t["start_time"] = pd.Timestamp("2025-01-06 07:00") + pd.to_timedelta(
+        np.arange(24) * 50, unit="min")
+    t["energy_kwh"] = simulate(t.assign(parked_min=parked_minutes(t)), v,
+                               n_steps=100)["energy_kwh_physics"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(**dict(PAPER_CONFIG, n_members=2), vehicle=v, n_steps=100,
+                        max_epochs=2).fit(
+            t, seed=0)
+    sched = pd.DataFrame({"departure": [8.0, 8.0 + 35.0 / 60.0], "duration_h": 0.25,
+                          "distance_km": 10.0, "avg_speed_kmh": 40.0, "mode": "normal",
+                          "temperature_c": -8.0, "trip_id": ["a", "b"]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = plan_charging(m, sched, soc_now=0.8, tariff=tariff(), charger_kw=7.0,
+                          n_samples=1000, n_eval=2000, soc_refine=0)
+        table = sched.drop(columns=["departure", "duration_h"]).assign(soc_initial=0.8)
+        direct = m.predict_distribution(table.assign(parked_min=[np.nan, 20.0])).mean()
+        e_soaked = m.predict_distribution(table).mean()
+    np.testing.assert_allclose(p.trips["parked_min"].to_numpy(), [np.nan, 20.0], equal_nan=True)
+    np.testing.assert_allclose(p.trips["energy_kwh_pred"].to_numpy(), direct, rtol=1e-9)
+    assert p.trips["energy_kwh_pred"].iloc[0] == pytest.approx(e_soaked[0], rel=1e-9)
+    assert p.trips["energy_kwh_pred"].iloc[1] < e_soaked[1] - 0.01  # warm cabin, less energy

@@ -185,7 +185,8 @@ def assess_plan(problem: ChargingProblem, x, y, ev: np.ndarray, dist_mean: np.nd
                         n_samples=n_samples, n_eval=n_eval)
 
 
-_TRIP_INPUTS = ("distance_km", "avg_speed_kmh", "temperature_c", "mode", "grade_pct")
+_TRIP_INPUTS = ("distance_km", "avg_speed_kmh", "temperature_c", "mode", "grade_pct",
+                "parked_min")
 
 
 def with_trip_inputs(plan: ChargingPlan, model, table: pd.DataFrame) -> ChargingPlan:

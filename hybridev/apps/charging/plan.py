@@ -284,6 +284,15 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     :func:`hybridev.learning.conformal.min_calibration_trips`); plan with a
     lower ``level`` (0.8 needs 4) rather than not at all.
 
+    Parking time: when the model's fit saw parking times (``fit_info_["parking"]``,
+    from the measured trips' ``start_time``), each trip gets the minutes since
+    the previous planned trip arrived (``parked_min``; the first trip soaked,
+    see :func:`hybridev.apps.charging.schedule.schedule_parked_minutes`), so a
+    trip after a short stop pays a partial warm-up, as in ``predict``. A model
+    fitted without parking times calibrated its warm-up on trips taken as
+    soaked, and plans that way. A ``parked_min`` column in the schedule is used
+    as given.
+
     Parameters
     ----------
     soc_refine : int
@@ -311,7 +320,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
                             charge_efficiency=charge_efficiency, soc_min=soc_min,
                             soc_max=soc_max, charger_kw=charger_kw, risk=risk)
     n_refine = _count("soc_refine", soc_refine, 0)
-    table = model_trip_table(problem)
+    table = model_trip_table(problem, parking=_saw_parking(model))
     kw = dict(method=method, n_samples=n_samples, n_eval=n_eval, level=level,
               risk_neutral=risk_neutral, compare=compare, seed=seed,
               time_limit_s=time_limit_s, margin_se=margin_se)
@@ -387,6 +396,13 @@ def evaluate_charging(charge_kw, dist, capacity_kwh: float,
         problem.block, weights=x, minlength=problem.n_trips + 1)[: problem.n_trips]
     return assess_plan(problem, x, y, ev, mean, level=level, method="given",
                    status="evaluated", risk=None, gamma=None, cal=None, n_samples=0)
+
+
+def _saw_parking(model) -> bool:
+    """Whether ``model``'s fit saw parking times (some trip with a known ``parked_min``)."""
+    info = getattr(model, "fit_info_", None)
+    parking = info.get("parking") if isinstance(info, dict) else None
+    return bool(parking) and int(parking.get("n_known", 0)) > 0
 
 
 def _predict(model, table: pd.DataFrame, level: float):

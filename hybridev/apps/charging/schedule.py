@@ -28,8 +28,17 @@ default ``distance_km / avg_speed_kmh``), the trip columns ``distance_km``,
 ``avg_speed_kmh``, ``temperature_c`` (ranges as in
 :func:`hybridev.validate_trips`), and optionally ``mode`` (may be missing or
 empty, as for predictions), ``trip_id``, ``grade_pct``,
-``hour`` and ``soc_initial`` (see :func:`model_trip_table`). Trips must not
-overlap (back-to-back is allowed).
+``hour``, ``soc_initial`` and ``parked_min`` (see :func:`model_trip_table`).
+Trips must not overlap (back-to-back is allowed).
+
+**Parking time.** A trip that starts soon after the previous one arrived
+starts with a warm cabin (a cool one in summer) and pays less warm-up
+(:mod:`hybridev.data.parked`). With ``parking=True`` (what
+:func:`hybridev.plan_charging` passes for a model whose fit saw parking
+times), :func:`model_trip_table` gives each trip the minutes since the
+previous trip's arrival (:func:`schedule_parked_minutes`); the first trip of
+the schedule, whose previous trip is not known, is taken as soaked (NaN), the
+conservative choice. A ``parked_min`` column in the schedule is used as given.
 
 A slot is **parked** when it does not overlap any trip ``[departure,
 arrival)``; a slot that overlaps a trip even partly is not parked (no
@@ -43,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from hybridev.data.parked import MAX_PARKED_MIN
 from hybridev.physics.validation import TRIP_RULES, FieldRule, check_table
 
 __all__ = [
@@ -51,6 +61,7 @@ __all__ = [
     "ChargingProblem",
     "model_trip_table",
     "parse_problem",
+    "schedule_parked_minutes",
 ]
 
 SCHEDULE_REQUIRED = ("departure", "distance_km", "avg_speed_kmh", "temperature_c")
@@ -288,17 +299,43 @@ def parse_problem(schedule: pd.DataFrame, tariff: pd.DataFrame, *, soc_now, capa
         capacity_kwh=cap, charger_kw=p_kw, risk=r)
 
 
-def model_trip_table(problem: ChargingProblem) -> pd.DataFrame:
+def schedule_parked_minutes(problem: ChargingProblem) -> np.ndarray:
+    """Minutes parked before each trip of the schedule, in departure order.
+
+    The gap from the previous trip's arrival to the trip's departure, capped at
+    :data:`hybridev.data.parked.MAX_PARKED_MIN` (a week); NaN (soaked to
+    ambient) for the first trip, whose previous trip the schedule does not hold.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_trips,), min
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> tariff = pd.DataFrame({"start": [0.0, 1.0], "price_per_kwh": 0.3})
+    >>> sched = pd.DataFrame({"departure": [0.0, 1.0], "duration_h": [0.5, 0.5],
+    ...                       "distance_km": 20.0, "avg_speed_kmh": 40.0, "temperature_c": 0.0})
+    >>> schedule_parked_minutes(parse_problem(sched, tariff, soc_now=0.5, capacity_kwh=60.0))
+    array([nan, 30.])
+    """
+    gap_min = 60.0 * (problem.departure_h[1:] - problem.arrival_h[:-1])
+    return np.r_[np.nan, np.clip(gap_min, 0.0, MAX_PARKED_MIN)]
+
+
+def model_trip_table(problem: ChargingProblem, *, parking: bool = False) -> pd.DataFrame:
     """Trip table handed to the energy model, in departure order.
 
-    The schedule's trip columns (and ``trip_id``, ``grade_pct`` if present);
+    The schedule's trip columns (and ``trip_id``, ``grade_pct``, ``parked_min``
+    if present);
     ``soc_initial`` is filled with ``soc_now`` when the schedule has none (a
     trip's departure SoC depends on the plan, which is not known yet;
     :func:`hybridev.plan_charging` then predicts again at the planned
     departure SoC, see its ``soc_refine``); ``hour`` is filled with the hour of
     day of the departure when departures are timestamps and the schedule has
     no ``hour`` (with departures in plain hours it is left to the model's
-    default).
+    default). With ``parking=True`` and no ``parked_min`` in the schedule,
+    ``parked_min`` is :func:`schedule_parked_minutes` (the first trip soaked).
 
     Examples
     --------
@@ -312,11 +349,14 @@ def model_trip_table(problem: ChargingProblem) -> pd.DataFrame:
     [[0.5, 1.5]]
     """
     cols = [c for c in ("trip_id", "distance_km", "avg_speed_kmh", "mode", "temperature_c",
-                        "soc_initial", "hour", "grade_pct") if c in problem.trips.columns]
+                        "soc_initial", "hour", "grade_pct", "parked_min")
+            if c in problem.trips.columns]
     t = problem.trips[cols].reset_index(drop=True)
     if "soc_initial" not in t.columns:
         t["soc_initial"] = problem.soc_now
     if "hour" not in t.columns and problem.t0 is not None:
         dep = problem.to_time(problem.departure_h)
         t["hour"] = (dep.hour + dep.minute / 60.0 + dep.second / 3600.0).to_numpy(float)
+    if parking and "parked_min" not in t.columns:
+        t["parked_min"] = schedule_parked_minutes(problem)
     return t
