@@ -17,9 +17,13 @@ def test_predict_range_equals_pandas(client, fitted, nparts):
                          soc_reserve=0.1, seed=2)
     got = lazy.compute()
     assert list(got.columns) == list(ref.columns) == list(lazy._meta.columns)
+    # A row's result does not depend on its partition beyond rounding: the float32
+    # network passes differ in their last bits with the batch they run in (BLAS
+    # kernels chosen by batch size), about 1e-10 relative after the range search
+    # (pandas alone: the same row predicted within rows 10-15 or 8-16).
     for col in ref.columns:
         if ref[col].dtype.kind == "f":
-            np.testing.assert_allclose(got[col], ref[col], rtol=1e-12, atol=0.0, err_msg=col)
+            np.testing.assert_allclose(got[col], ref[col], rtol=1e-9, atol=0.0, err_msg=col)
 
 
 def test_per_row_soc_is_refused(fitted):
