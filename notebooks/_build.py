@@ -560,7 +560,6 @@ CALIBRATION = [
     N_STEPS = 200
     TRUE = {"drag_area_m2": 0.60, "rolling_resistance_coef": 0.012,
             "drivetrain_efficiency": 0.87, "aux_base_kw": 0.8, "regen_scale": 0.85}
-    TRUE_CLIMATE = {"heating_scale": 1.0, "cooling_scale": 1.0}  # the nominal bands
     NOISE = 0.03
     trips = make_trips(300, seed=1)
     measured = simulate_measured(trips, true_params=TRUE, noise_rel=NOISE, seed=2,
@@ -575,14 +574,13 @@ CALIBRATION = [
     md("""
     ## 2. The physics posterior
 
-    Five parameters, the band climate's heating and cooling scales (the true car heats and
-    cools as the nominal one: both 1) and the relative noise, priors centred on the nominal
-    vehicle (widths in `PhysicsPrior`). The chain runs until it is at least 50 autocorrelation times long.
+    Five parameters plus the relative noise, priors centred on the nominal vehicle (widths in
+    `PhysicsPrior`). The chain runs until it is at least 50 autocorrelation times long.
     """),
     code("""
     post = calibrate_physics(measured, trace_steps=N_STEPS, seed=0)
     summary = post.summary(level=0.9)
-    summary["true"] = pd.Series({**TRUE, **TRUE_CLIMATE, "noise_rel": NOISE})
+    summary["true"] = pd.Series({**TRUE, "noise_rel": NOISE})
     summary["true inside 90 %"] = summary["true"].between(summary["q05"], summary["q95"])
     summary
     """),
@@ -607,7 +605,7 @@ CALIBRATION = [
     code("""
     labels = [*post.param_names, "noise_rel"]
     fig = corner.corner(np.column_stack([post.samples, post.noise_rel]), labels=labels,
-                        truths=[*({**TRUE, **TRUE_CLIMATE}[p] for p in post.param_names), NOISE],
+                        truths=[*(TRUE[p] for p in post.param_names), NOISE],
                         quantiles=[0.05, 0.5, 0.95], show_titles=True, title_fmt=".3g",
                         title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 8})
     """),

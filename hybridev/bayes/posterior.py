@@ -32,12 +32,9 @@ def vehicle_with(vehicle: VehicleParams, values) -> VehicleParams:
     ``drag_area_m2`` is applied through ``drag_coefficient`` (frontal area
     kept), ``hvac_scale`` multiplies ``hvac_kw`` (paper preset) and the
     cabin's ``UA`` and solar gain (continuous model; the same as scaling the
-    climate power wherever the heater is below its cap), ``heating_scale`` and
-    ``cooling_scale`` the heating and cooling parts alone (``heating_use`` and
-    ``cooling_use``; for the paper's bands, the two bands below 15 degC and the
-    two from it, :func:`hybridev.physics.climate.band_cooling_kw`),
-    ``warmup_scale`` the cabin heat capacity and battery warm-up;
-    ``regen_scale`` is not a vehicle property and is ignored.
+    climate power wherever the heater is below its cap), ``warmup_scale`` the
+    cabin heat capacity and battery warm-up; ``regen_scale`` is not a vehicle
+    property and is ignored.
 
     Examples
     --------
@@ -52,21 +49,16 @@ def vehicle_with(vehicle: VehicleParams, values) -> VehicleParams:
         if name == "drag_area_m2":
             kw["drag_coefficient"] = float(x) / vehicle.frontal_area_m2
         elif name == "hvac_scale":
-            kw["hvac_kw"] = tuple(float(x) * h for h in kw.get("hvac_kw", vehicle.hvac_kw))
+            kw["hvac_kw"] = tuple(float(x) * h for h in vehicle.hvac_kw)
             kw["cabin_ua_w_per_k"] = float(x) * vehicle.cabin_ua_w_per_k
             kw["solar_gain_w"] = float(x) * vehicle.solar_gain_w
         elif name == "heating_scale":
             if vehicle.climate_model == "continuous":
                 kw["heating_use"] = float(x) * vehicle.heating_use
-            else:  # the paper's bands below 15 degC (physics.climate.band_cooling_kw)
-                hv = kw.get("hvac_kw", vehicle.hvac_kw)
-                kw["hvac_kw"] = (float(x) * hv[0], float(x) * hv[1], hv[2], hv[3])
+            else:  # the paper's bands are all "heating" in the statistics
+                kw["hvac_kw"] = tuple(float(x) * h for h in kw.get("hvac_kw", vehicle.hvac_kw))
         elif name == "cooling_scale":
-            if vehicle.climate_model == "continuous":
-                kw["cooling_use"] = float(x) * vehicle.cooling_use
-            else:  # the bands from 15 degC: ventilation and air conditioning
-                hv = kw.get("hvac_kw", vehicle.hvac_kw)
-                kw["hvac_kw"] = (hv[0], hv[1], float(x) * hv[2], float(x) * hv[3])
+            kw["cooling_use"] = float(x) * vehicle.cooling_use
         elif name == "warmup_scale":
             kw["cabin_heat_capacity_kj_per_k"] = float(x) * vehicle.cabin_heat_capacity_kj_per_k
             kw["battery_warmup_kwh_per_k"] = float(x) * vehicle.battery_warmup_kwh_per_k

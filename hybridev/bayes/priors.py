@@ -10,7 +10,7 @@ import numpy as np
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES
 from hybridev.physics.stats import STAT_PARAMS
 
-__all__ = ["BAND_CLIMATE_PARAMS", "CLIMATE_PARAMS", "DEFAULT_PARAMS", "REGEN_EFFICIENCY_MAX", "PhysicsPrior"]
+__all__ = ["CLIMATE_PARAMS", "DEFAULT_PARAMS", "REGEN_EFFICIENCY_MAX", "PhysicsPrior"]
 
 REGEN_EFFICIENCY_MAX = max(p.regen_efficiency for p in (*PROFILES.values(), LOGGED_PROFILE))
 """Highest warm-weather regen efficiency of any profile (0.75, ``eco``).
@@ -33,11 +33,6 @@ CLIMATE_PARAMS = ("heating_scale", "cooling_scale", "warmup_scale", "heating_off
 scales, and the driver's heating onset) that
 :func:`hybridev.bayes.sampler.calibrate_physics` adds to the sampled set by
 default when the vehicle uses the continuous climate model."""
-
-BAND_CLIMATE_PARAMS = ("heating_scale", "cooling_scale")
-"""The climate parameters added by default for the paper's band model: the heating
-bands (below 15 degC) and the ventilation and cooling bands (from 15 degC) scaled
-apart (:func:`hybridev.physics.climate.band_cooling_kw`)."""
 
 
 @dataclass(frozen=True)

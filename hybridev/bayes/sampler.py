@@ -47,7 +47,6 @@ from hybridev.bayes.heater import select_heater_kind
 from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import (
-    BAND_CLIMATE_PARAMS,
     CLIMATE_PARAMS,
     DEFAULT_PARAMS,
     REGEN_EFFICIENCY_MAX,
@@ -162,14 +161,10 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         Rebuild the statistics' sign split at the MAP before sampling.
     climate_params : bool, optional
         Also sample :data:`~hybridev.bayes.priors.CLIMATE_PARAMS` (climate
-        power and warm-up scales, and the heating onset ``heating_offset_k``)
-        when not in ``params``; for the paper's band model, which has no
-        warm-up and no onset, only :data:`~hybridev.bayes.priors.BAND_CLIMATE_PARAMS`
-        (the heating bands below 15 degC and the cooling and ventilation bands
-        from it, scaled apart). Default: yes (the climate load is the least
-        known part of a car, and a cold-weather excess it cannot take up would
-        otherwise go to the base auxiliary power, which acts at every
-        temperature).
+        power and warm-up scales, and the heating onset ``heating_offset_k``,
+        which the paper's band model does not have) when not in ``params``. Default: yes for a
+        vehicle with the continuous climate model (its climate load is the
+        least known part of a new car), no for the paper's band model.
     sign_vehicle : VehicleParams, optional
         Split the wheel power by sign at this vehicle's road load instead
         (no refinement): posteriors sampled with the same ``sign_vehicle``
@@ -203,7 +198,7 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     >>> from hybridev import make_trips
     >>> from hybridev.bayes.sampler import simulate_measured
     >>> m = simulate_measured(make_trips(60, seed=0), noise_rel=0.03, seed=1)
-    >>> post = calibrate_physics(m, params=("aux_base_kw",), climate_params=False, n_walkers=8)
+    >>> post = calibrate_physics(m, params=("aux_base_kw",), n_walkers=8)
     >>> post.samples.shape[1], bool(post.summary().loc["aux_base_kw", "q05"] < 0.5)
     (1, True)
     """
@@ -221,10 +216,10 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     pr = prior or PhysicsPrior()
     names = tuple(params)
     if climate_params is None:
-        climate_params = True
-    if climate_params:  # the paper's bands have no warm-up and no onset
+        climate_params = veh.climate_model == "continuous"
+    if climate_params:
         names += tuple(n for n in CLIMATE_PARAMS if n not in names and (
-            veh.climate_model == "continuous" or n in BAND_CLIMATE_PARAMS))
+            n != "heating_offset_k" or veh.climate_model == "continuous"))  # no onset in bands
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"params={params!r} must be distinct names from {list(STAT_PARAMS)}")
     for n in names:

@@ -17,12 +17,7 @@ from hybridev.physics.kinematics import profile_table
 from hybridev.physics.params import DrivingProfile, ProfileLike, VehicleParams, get_profile
 from hybridev.physics.thermal import steady_climate_kw
 
-__all__ = ["BAND_COOLING_FROM_C", "aux_power_kw", "band_cooling_kw", "hvac_power_kw"]
-
-BAND_COOLING_FROM_C = 15.0
-"""Lowest ambient temperature of the paper's bands that the calibration counts as
-cooling and ventilation (``cooling_scale``) rather than heating (``heating_scale``):
-the bands ``15 <= T <= 25`` and ``T > 25`` degC. The two bands below are heating."""
+__all__ = ["aux_power_kw", "hvac_power_kw"]
 
 
 def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.ndarray:
@@ -56,27 +51,6 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
         return steady_climate_kw(t, v)
     cold, cool, mild, hot = v.hvac_kw
     return np.where(t < 0.0, cold, np.where(t < 15.0, cool, np.where(t <= 25.0, mild, hot)))
-
-
-def band_cooling_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.ndarray:
-    """Cooling-and-ventilation part of the paper's band power, kW (0 below 15 degC).
-
-    The bands at and above :data:`BAND_COOLING_FROM_C` (mild ventilation and air
-    conditioning); the rest of :func:`hvac_power_kw` is heating. The calibration
-    scales the two parts apart (``heating_scale``, ``cooling_scale``), as for
-    the continuous model's :func:`hybridev.physics.thermal.climate_split_kw`.
-    Zero for a continuous-climate vehicle (use that function there).
-
-    Examples
-    --------
-    >>> band_cooling_kw([-5, 10, 20, 32]).tolist()
-    [0.0, 0.0, 0.5, 2.5]
-    """
-    v = vehicle or VehicleParams()
-    t = np.asarray(temperature_c, dtype=float)
-    if v.climate_model == "continuous":
-        return np.zeros_like(t)
-    return np.where(t >= BAND_COOLING_FROM_C, hvac_power_kw(t, v), 0.0)
 
 
 def _profile_values(profile: ProfileLike, n_trips: int | None) -> tuple[np.ndarray, ...]:

@@ -11,7 +11,7 @@ import copy
 import numpy as np
 import pandas as pd
 
-from hybridev.physics.climate import band_cooling_kw, hvac_power_kw
+from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.forces import MOVING_MPS, _moving_steps
 from hybridev.physics.kinematics import profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
@@ -84,9 +84,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
     warm = np.zeros(n)
     cool = np.zeros(n)
     d_heat = d_warm = None
-    if veh.climate_model != "continuous":  # the paper's bands: heating below 15 degC
-        cool[:] = band_cooling_kw(t, veh) if cooling_kw is None else cooling_kw
-    else:
+    if veh.climate_model == "continuous":
         cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
@@ -382,7 +380,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     temp = trips["temperature_c"].to_numpy(float)
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
-               else band_cooling_kw(temp[trip], veh))
+               else np.zeros(len(trip)))
     sums = {f"{c}_{s}": np.zeros(len(trip)) for c in _SUMS for s in ("pos", "neg")}
     heat_grid = None
     duration = np.zeros(len(trip))

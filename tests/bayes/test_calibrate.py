@@ -56,12 +56,10 @@ def test_posterior_recovers_known_parameters(posterior):
 def test_summary_sample_and_parameters(posterior, trips):
     s = posterior.summary()
     assert list(s.columns) == ["nominal", "median", "mean", "sd", "q05", "q95", "tau"]
-    # the default set: road load, efficiency, auxiliary, regeneration, then the band
-    # preset's climate scales (heating below 15 degC, cooling and ventilation from it)
-    assert list(s.index) == [*TRUTH, "heating_scale", "cooling_scale", "noise_rel"]
+    assert list(s.index) == [*TRUTH, "noise_rel"]
     assert (s.q05 < s["median"]).all() and (s["median"] < s.q95).all()
     draws = posterior.sample(50, np.random.default_rng(0))
-    assert draws.shape == (50, 7)
+    assert draws.shape == (50, 5)
     stats = posterior.stats_for(trips)
     e = energy_from_stats(stats, posterior.as_params(draws))
     assert e.shape == (50, len(trips)) and np.isfinite(e).all()
@@ -133,11 +131,11 @@ def test_same_seed_same_chain():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         a = calibrate_physics(m, params=("aux_base_kw", "drag_area_m2"), n_walkers=8,
-                              climate_params=False, n_steps=60, seed=4)
+                              n_steps=60, seed=4)
         b = calibrate_physics(m, params=("aux_base_kw", "drag_area_m2"), n_walkers=8,
-                              climate_params=False, n_steps=60, seed=4)
+                              n_steps=60, seed=4)
         c = calibrate_physics(m, params=("aux_base_kw", "drag_area_m2"), n_walkers=8,
-                              climate_params=False, n_steps=60, seed=5)
+                              n_steps=60, seed=5)
     assert np.array_equal(a.samples, b.samples)
     assert not np.array_equal(a.samples, c.samples)
 

@@ -216,30 +216,8 @@ def test_band_preset_calibration_has_no_heating_onset():
         warnings.simplefilter("ignore")
         post = calibrate_physics(m, VehicleParams(), params=("aux_base_kw",), n_steps=200,
                                  climate_params=True, groups=None)
-        default = calibrate_physics(m, VehicleParams(), params=("aux_base_kw",), n_steps=200,
-                                    groups=None)
-        none = calibrate_physics(m, VehicleParams(), params=("aux_base_kw",), n_steps=200,
-                                 climate_params=False, groups=None)
-    # the bands have no warm-up and no onset: only the heating and cooling scales
-    assert list(post.param_names) == list(default.param_names) == [
-        "aux_base_kw", "heating_scale", "cooling_scale"]
-    assert list(none.param_names) == ["aux_base_kw"]
-
-
-def test_band_preset_posterior_separates_heating_from_cooling():
-    """A band car whose heater draws 1.6x the paper's bands and whose A/C the nominal:
-    the posterior finds both (99 % credible intervals; 3 % noise, 240 trips at -15 to
-    35 degC), so the base auxiliary power is not raised to serve the cold trips."""
-    truth = {"heating_scale": 1.6}
-    m = simulate_measured(_trips(240, 12), VehicleParams(), true_params=truth,
-                          noise_rel=0.03, seed=3)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        post = calibrate_physics(m, VehicleParams(), n_steps=1500, groups=None, seed=0)
-    s = post.summary(level=0.99)
-    assert s.loc["heating_scale", "q05"] <= 1.6 <= s.loc["heating_scale", "q95"]
-    assert s.loc["cooling_scale", "q05"] <= 1.0 <= s.loc["cooling_scale", "q95"]
-    assert s.loc["aux_base_kw", "q05"] <= VehicleParams().aux_base_kw <= s.loc["aux_base_kw", "q95"]
+    assert "heating_offset_k" not in post.param_names
+    assert "heating_scale" in post.param_names
 
 
 def test_heating_onset_prior_is_narrow_below_and_wide_above():

@@ -185,29 +185,6 @@ def test_from_coastdown_round_trip():
         veh.drag_area_m2, rel=1e-15)
 
 
-@pytest.mark.parametrize("climate", ["paper_bands", "continuous"])
-def test_climate_scales_match_the_simulated_vehicle(climate):
-    """For the paper's bands, energy_from_stats with heating, cooling and HVAC scales
-    equals simulate() of vehicle_with() those scales (exact to rounding; heating below
-    15 degC, cooling and ventilation from it); for both climate models each scale
-    moves only its own trips."""
-    t = make_trips(10, seed=4).assign(
-        temperature_c=[-20.0, -5.0, 0.0, 10.0, 14.9, 15.0, 20.0, 25.0, 25.1, 35.0])
-    veh = VehicleParams(climate_model=climate)
-    s = trip_stats(t, veh, n_steps=100)
-    if climate == "paper_bands":  # (continuous: the heater's cap makes it approximate)
-        p = {"heating_scale": 1.4, "cooling_scale": 0.55, "hvac_scale": 1.2}
-        sim = simulate(t, vehicle_with(veh, p), n_steps=100)["energy_kwh_physics"].to_numpy()
-        np.testing.assert_allclose(energy_from_stats(s, p).ravel(), sim, rtol=1e-12)
-    base = energy_from_stats(s).ravel()
-    heat = energy_from_stats(s, {"heating_scale": 1.5}).ravel() != base
-    cool = energy_from_stats(s, {"cooling_scale": 1.5}).ravel() != base
-    assert not (heat & cool).any()
-    if climate == "paper_bands":
-        assert heat.tolist() == (t["temperature_c"] < 15.0).tolist()
-        assert cool.tolist() == (t["temperature_c"] >= 15.0).tolist()
-
-
 def test_bad_parameters_are_rejected(trips):
     s = trip_stats(trips.head(3))
     with pytest.raises(ValueError, match="unknown parameter 'mass_kg'"):
