@@ -13,7 +13,7 @@ Studies (all with ``HybridModel`` defaults unless a conformal mode is named):
    rolling resistance +10 %) and its speed traces and noise come from seeds the
    model never uses (truth seeds >= 100, model ``physics_seed=0``). Split
    conformal, CV+ and the default (``"auto"``) side by side; 1,000 test trips;
-   8 training draws per size up to 40 trips (``--small-seeds``: one fit's
+   16 training draws per size up to 40 trips (``--small-seeds``: one fit's
    coverage there varies by about 0.05 from draw to draw), 2 above (``--seeds``).
 2. **Warm-trained, cold-tested** on the synthetic truth: trained on the 20 and
    32 degC trips only, tested on all temperatures (-5 degC is new). Coverage of
@@ -384,11 +384,11 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer sizes and draws")
     ap.add_argument("--seeds", type=int, default=None, help="training draws per size")
     ap.add_argument("--small-seeds", type=int, default=None,
-                    help=f"training draws per size up to {SMALL_MAX} trips (default 8)")
+                    help=f"training draws per size up to {SMALL_MAX} trips (default 16)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     seeds = args.seeds or (1 if args.quick else 2)
-    small_seeds = args.small_seeds or (1 if args.quick else 8)
+    small_seeds = args.small_seeds or (1 if args.quick else 16)
     global SIZES
     if args.quick:
         SIZES = (20, 100)

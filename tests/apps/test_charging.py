@@ -519,7 +519,7 @@ def test_plan_gives_parking_time_only_to_a_model_whose_fit_saw_it():
 
 
 def test_plan_after_a_short_stop_predicts_the_warm_cabin_like_predict():
-    """A model fitted with start times plans a trip 10 min after the last one with a partial warm-up."""
+    """A model fitted with start times plans a trip 20 min after the last one with a partial warm-up."""
     from hybridev import HybridModel, VehicleParams, make_trips, parked_minutes, simulate
     from hybridev.learning.model import PAPER_CONFIG
 
@@ -532,8 +532,7 @@ def test_plan_after_a_short_stop_predicts_the_warm_cabin_like_predict():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = HybridModel(**dict(PAPER_CONFIG, n_members=2), vehicle=v, n_steps=100,
-                        max_epochs=2).fit(
-            t, seed=0)
+                        max_epochs=2).fit(t, seed=0)
     sched = pd.DataFrame({"departure": [8.0, 8.0 + 35.0 / 60.0], "duration_h": 0.25,
                           "distance_km": 10.0, "avg_speed_kmh": 40.0, "mode": "normal",
                           "temperature_c": -8.0, "trip_id": ["a", "b"]})
