@@ -37,8 +37,17 @@ Set-up (every number in the output comes from this script):
      (:mod:`hybridev.learning.ood`): being conservative is the intended
      behaviour there. Reported apart, not as the headline.
 
-* Model: ``HybridModel(physics_seed=500 + r)`` (defaults otherwise),
-  ``fit(..., seed=r)``: its synthesised traces are independent of the truth's.
+  3. **in-domain, new user**: the history of design 1, but the model set up
+     as the README tells a new user to: ``VehicleParams.from_coastdown`` of
+     the paper vehicle's nominal road load and mass (the continuous climate
+     model and the compact-BEV defaults; ``NEW_USER_VEHICLE`` of
+     ``evaluation/shift_and_small_data``). The truth is the paper's vehicle
+     with its four-band climate, so this model's climate, auxiliary and
+     drive-loss physics differ from the truth's and are learned from the trips.
+
+* Model: ``HybridModel(physics_seed=500 + r)`` (defaults otherwise; design 3
+  with the new user's vehicle), ``fit(..., seed=r)``: its synthesised traces
+  are independent of the truth's.
 * Planned weeks: ``example_schedule(7, seed=10 r + j)``, ``j < SCHEDULES``,
   with :func:`hybridev.apps.demo.example_tariff`, a 7.4 kW charger, SoC 0.5 at
   the start, ``soc_min`` 0.1, risks 0.05 and 0.10, ``plan_charging``
@@ -61,6 +70,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -77,6 +87,11 @@ from hybridev.physics.oracle import oracle_energy_kwh
 from hybridev.physics.truth import MIN_NOISE_FACTOR, STRUCTURED_NOISE_SIGMA
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "shift_and_small_data"))
+from shift_and_small_data import NEW_USER_VEHICLE  # noqa: E402  (the new user's set-up)
+
+NEW_USER = "in-domain, new user"
+DESIGNS = ("in-domain", NEW_USER, "out-of-domain")
 OUT_MD, OUT_JSON = HERE / "charging_risk.md", HERE / "charging_risk.json"
 REPLICATES = 10
 OOD_REPLICATES = 4
@@ -120,6 +135,19 @@ def truth_scenarios(schedule: pd.DataFrame, soc_departure: np.ndarray, trace_see
     return pick * noise, mean.mean(axis=0)
 
 
+def weekly_spread_parts(d, truth_week_kwh: float) -> tuple[float, float, float]:
+    """The model's weekly-total spread by part, each as a fraction of the truth's weekly mean.
+
+    Physics posterior draw and ensemble member (shared by every trip of the week) and
+    the members' noise (independent between trips), each scaled by the conformal factor.
+    """
+    c = float(np.mean(d.spread_factor))
+    phys = c * d.physics_draws_kwh.sum(axis=1).std()
+    memb = c * d.residual_mean_kwh.sum(axis=1).std()
+    ind = c * np.sqrt((d.residual_std_kwh ** 2).mean(axis=0).sum())
+    return phys / truth_week_kwh, memb / truth_week_kwh, ind / truth_week_kwh
+
+
 def _row_order(schedule: pd.DataFrame, per_departure: np.ndarray) -> np.ndarray:
     order = np.argsort(schedule["departure"].to_numpy(), kind="stable")
     out = np.empty(len(schedule))
@@ -130,11 +158,12 @@ def _row_order(schedule: pd.DataFrame, per_departure: np.ndarray) -> np.ndarray:
 def run_replicate(design: str, r: int, tariff: pd.DataFrame) -> tuple[list[dict], dict]:
     """Fit one model, plan ``SCHEDULES`` weeks, assess against the truth."""
     t0 = time.perf_counter()
-    data = (history(HISTORY_WEEKS, 100 + r) if design == "in-domain"
-            else make_dataset(N_OOD_TRIPS, truth="structured", seed=100 + r))
+    data = (make_dataset(N_OOD_TRIPS, truth="structured", seed=100 + r)
+            if design == "out-of-domain" else history(HISTORY_WEEKS, 100 + r))
+    vehicle = NEW_USER_VEHICLE if design == NEW_USER else None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = HybridModel(physics_seed=500 + r).fit(data, seed=r)
+        model = HybridModel(vehicle, physics_seed=500 + r).fit(data, seed=r)
     rows, diag, diag0 = [], [], []
     for j in range(SCHEDULES):
         sseed = 10 * r + j
@@ -170,7 +199,9 @@ def run_replicate(design: str, r: int, tariff: pd.DataFrame) -> tuple[list[dict]
                         flagged = ~model.predict_interval(table)["in_domain"].to_numpy(bool)
                     m_week = d.sample(4000, sseed).sum(axis=1)
                     diag.append((d.mean().sum() / tmean.sum() - 1.0,
-                                 m_week.std() / scen.sum(axis=1).std(), flagged.mean()))
+                                 m_week.std() / scen.sum(axis=1).std(), flagged.mean(),
+                                 *weekly_spread_parts(d, tmean.sum()),
+                                 scen.sum(axis=1).std() / tmean.sum()))
                 elif name == "risk-aware, soc_refine=0":  # predicted at soc_now, as planned
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
@@ -181,6 +212,10 @@ def run_replicate(design: str, r: int, tariff: pd.DataFrame) -> tuple[list[dict]
             "weekly_bias_pct": 100 * float(dg[:, 0].mean()),
             "weekly_bias_pct_soc_refine_0": 100 * float(np.mean(diag0)),
             "weekly_sd_ratio": float(dg[:, 1].mean()),
+            "weekly_sd_physics_pct": 100 * float(dg[:, 3].mean()),
+            "weekly_sd_members_pct": 100 * float(dg[:, 4].mean()),
+            "weekly_sd_independent_pct": 100 * float(dg[:, 5].mean()),
+            "weekly_sd_truth_pct": 100 * float(dg[:, 6].mean()),
             "flagged_trip_fraction": float(dg[:, 2].mean()),
             "conformal_spread_factor_0.9": float(model.conformal_.spread_factor(0.9)),
             "seconds": round(time.perf_counter() - t0, 1)}
@@ -220,7 +255,8 @@ def main(argv=None) -> int:
     tariff = example_tariff(7)
     rows, infos = [], []
     n_ood = max(2, round(args.replicates * OOD_REPLICATES / REPLICATES))
-    for design, n_des in (("in-domain", args.replicates), ("out-of-domain", n_ood)):
+    for design, n_des in (("in-domain", args.replicates), (NEW_USER, args.replicates),
+                          ("out-of-domain", n_ood)):
         for r in range(n_des):
             rr, info = run_replicate(design, r, tariff)
             rows += rr
@@ -238,7 +274,7 @@ def main(argv=None) -> int:
                     & (summ["risk target"] == risk)].iloc[0]
 
     verdict = {}
-    for design in ("in-domain", "out-of-domain"):
+    for design in DESIGNS:
         for risk in RISKS:
             s = pick(design, risk=risk)
             verdict[f"{design} {risk:g}"] = {
@@ -248,14 +284,17 @@ def main(argv=None) -> int:
     aware = res[res.plan == "risk-aware"]
     over = aware["P(below), truth"] > aware["risk target"] + 3 * aware["SE"]
     over_n = {d: (int(over[aware.design == d].sum()), int((aware.design == d).sum()))
-              for d in ("in-domain", "out-of-domain")}
+              for d in DESIGNS}
     ind, ood = verdict["in-domain 0.05"], verdict["out-of-domain 0.05"]
+    nu = verdict[f"{NEW_USER} 0.05"]
     diag = inf.groupby("design", sort=False).agg(
         bias=("weekly_bias_pct", "mean"), bias_sd=("weekly_bias_pct", "std"),
         bias0=("weekly_bias_pct_soc_refine_0", "mean"),
         sd_ratio=("weekly_sd_ratio", "mean"), widened=("flagged_trip_fraction", "mean"),
+        sd_phys=("weekly_sd_physics_pct", "mean"), sd_memb=("weekly_sd_members_pct", "mean"),
+        sd_ind=("weekly_sd_independent_pct", "mean"), sd_truth=("weekly_sd_truth_pct", "mean"),
         n_train=("n_train", "first"), seconds=("seconds", "mean")).reset_index()
-    dsel = {d: diag[diag.design == d].iloc[0] for d in ("in-domain", "out-of-domain")}
+    dsel = {d: diag[diag.design == d].iloc[0] for d in DESIGNS}
     n_rep = args.replicates
     temps = np.concatenate([example_schedule(7, seed=10 * r + j)["temperature_c"].to_numpy()
                             for r in range(n_rep) for j in range(SCHEDULES)])
@@ -275,7 +314,7 @@ def main(argv=None) -> int:
 
 Generated by `python evaluation/charging_risk/charging_risk.py` on {_dt.date.today().isoformat()} (hybridev
 {hybridev.__version__}, {elapsed:.0f} s wall time, one process); do not edit by hand. Set-up in the script's
-docstring: {n_rep} in-domain and {n_ood} out-of-domain replicates, each a fresh training set from the structured truth, a
+docstring: {n_rep} in-domain replicates for each of two model set-ups and {n_ood} out-of-domain replicates, each a fresh training set from the structured truth, a
 default `HybridModel()` with its own seeds (its speed traces independent of the truth's), and
 {SCHEDULES} planned weeks it never saw (example routine, 7.4 kW charger, SoC 0.5 at the start,
 soc_min 0.1), each plan assessed against the truth on {N_EVAL:,} joint scenarios with independent
@@ -290,13 +329,14 @@ over replicates.
 
 | design | training data | achieved risk, mean +- SE | range over replicates | within [{lo_b * 0.05:.3f}, {hi_b * 0.05:.3f}] |
 |---|---|---|---|---|
-| in-domain | {int(dsel['in-domain'].n_train)} trips: {HISTORY_WEEKS} weeks of the same routine | {ind['mean']:.4f} +- {ind['se']:.4f} | {ind['min']:.4f} - {ind['max']:.4f} | **{yes[ind['on_target']]}** |
+| in-domain | {int(dsel['in-domain'].n_train)} trips: {HISTORY_WEEKS} weeks of the same routine; `VehicleParams()` (the truth's vehicle and band climate) | {ind['mean']:.4f} +- {ind['se']:.4f} | {ind['min']:.4f} - {ind['max']:.4f} | **{yes[ind['on_target']]}** |
+| {NEW_USER} | the same trips; `VehicleParams.from_coastdown(...)` of the nominal road load (continuous climate) | {nu['mean']:.4f} +- {nu['se']:.4f} | {nu['min']:.4f} - {nu['max']:.4f} | **{yes[nu['on_target']]}** |
 | out-of-domain | {int(dsel['out-of-domain'].n_train)} trips: the paper's design (-5/20/32 degC) | {ood['mean']:.4f} +- {ood['se']:.4f} | {ood['min']:.4f} - {ood['max']:.4f} | {yes[ood['on_target']]} (conservative by design) |
 
 Stays at or below the target (mean <= target + 2 SE): in-domain **{yes[ind['below_target']]}**,
-out-of-domain **{yes[ood['below_target']]}**. Single plans whose truth risk exceeds the target by more
+{NEW_USER} **{yes[nu['below_target']]}**, out-of-domain **{yes[ood['below_target']]}**. Single plans whose truth risk exceeds the target by more
 than 3 Monte Carlo SE (a calibrated planner has some: its replicates scatter around the target):
-in-domain {over_n['in-domain'][0]} of {over_n['in-domain'][1]}, out-of-domain
+in-domain {over_n['in-domain'][0]} of {over_n['in-domain'][1]}, {NEW_USER} {over_n[NEW_USER][0]} of {over_n[NEW_USER][1]}, out-of-domain
 {over_n['out-of-domain'][0]} of {over_n['out-of-domain'][1]} (both targets).
 
 ## Summary by design, target and plan
@@ -313,7 +353,7 @@ risk against the truth, `se` its standard error over replicates, `lo`/`hi` the r
 |---|---|---|---|---|---|
 """ + "\n".join(
         f"| {d} | {s.bias:+.2f} | {s.bias_sd:.2f} | {s.bias0:+.2f} | {s.sd_ratio:.2f} | {s.widened:.2f} |"
-        for d, s in dsel.items()) + f"""
+        for d, s in dsel.items()) + """
 
 The truth's weekly-total spread is its aleatoric part only (independent trips); the model's
 includes its epistemic part (posterior draw and ensemble member, common to all trips of a week),
@@ -321,6 +361,19 @@ which should match the spread of its weekly error over replicates (the "sd over 
 column). The `soc_refine=0` rows plan as before this change: every trip predicted at `soc_now`;
 re-predicting at the planned departure SoC (the default) removes the part of the bias that came
 from the internal-resistance loss at the wrong SoC.
+
+Where the model's weekly spread comes from: the standard deviation of the week's total energy
+from each part of the predictive distribution alone (conformal factor included), as % of the
+truth's weekly mean, beside the truth's aleatoric spread and the scatter of the model's weekly
+error between replicates (its actual epistemic error). A calibrated model has a shared part
+(physics and members) about the size of that scatter and an independent part about the size of
+the truth's aleatoric spread plus what it cannot learn of single trips.
+
+| design | shared: physics posterior draw | shared: ensemble member | independent: members' noise | truth's aleatoric spread | model's weekly error, sd over replicates |
+|---|---|---|---|---|---|
+""" + "\n".join(
+        f"| {d} | {s.sd_phys:.2f} | {s.sd_memb:.2f} | {s.sd_ind:.2f} | {s.sd_truth:.2f} | "
+        f"{s.bias_sd:.2f} |" for d, s in dsel.items()) + f"""
 
 {ood_text}
 
@@ -337,7 +390,7 @@ own calibration trips and varies between fits.
 {_md(res)}
 """
     payload = {"generated": _dt.date.today().isoformat(), "hybridev": hybridev.__version__,
-               "replicates": {"in-domain": n_rep, "out-of-domain": n_ood},
+               "replicates": {"in-domain": n_rep, NEW_USER: n_rep, "out-of-domain": n_ood},
                "schedules_per_replicate": SCHEDULES,
                "verdict": verdict, "over_target_plans": over_n,
                "summary": summ.to_dict(orient="records"),
@@ -348,7 +401,8 @@ own calibration trips and varies between fits.
     with atomic_path(OUT_JSON) as tmp:
         tmp.write_text(json.dumps(payload, indent=1) + "\n")
     print(f"wrote {OUT_MD.name}, {OUT_JSON.name} ({elapsed:.0f} s): in-domain "
-          f"{ind['mean']:.4f} +- {ind['se']:.4f}, out-of-domain {ood['mean']:.4f} +- {ood['se']:.4f}")
+          f"{ind['mean']:.4f} +- {ind['se']:.4f}, {NEW_USER} {nu['mean']:.4f} +- {nu['se']:.4f}, "
+          f"out-of-domain {ood['mean']:.4f} +- {ood['se']:.4f}")
     return 0
 
 
