@@ -833,9 +833,10 @@ RANGE = [
     """),
     md("""
     Mind the caveat in `hybridev.apps.range`: a full battery's range (hundreds of km) is beyond the
-    20-200 km training trips, so the network extrapolates in distance and the bands cover the
-    true range less often there. `evaluation/range_bands/range_bands.md` measures their coverage within
-    and beyond the training distances, and for a model trained on longer trips.
+    20-200 km training trips, so the network would extrapolate in distance. Such ranges are flagged
+    out of the training domain (`in_domain` false) and their bands widened from the physics posterior.
+    `evaluation/range_bands/range_bands.md` measures their coverage within and beyond the training
+    distances, and for a model trained on longer trips.
 
     ## 2. SoC fan chart
 
