@@ -2,10 +2,13 @@
 
 Part of ``evaluation/uncertainty/uncertainty.py`` (not imported by the library).
 
-* ``make_dataset(1500, truth, seed=s)`` gives the paper-protocol data; its
-  physics traces use trace seed ``s`` and keys ``trip_id = 0..1499``, so every
-  model of seed ``s`` is built with ``physics_seed=s`` (then its physics sees
-  exactly the traces of the truth).
+* ``make_dataset(1500, truth, seed=s, vehicle=TRUTH_VEHICLE)`` gives the
+  paper-protocol data of the truth's own car (:data:`TRUTH_VEHICLE`: the
+  paper's vehicle with mass +8 %, drag and rolling resistance +10 %, as in
+  ``evaluation/shift_and_small_data``); its physics traces use trace seed
+  ``s`` and keys ``trip_id = 0..1499``. Every model of seed ``s`` is built with
+  ``physics_seed = PHYSICS_SEED_OFFSET + s`` and the nominal (paper) vehicle,
+  so neither the truth's traces nor its car are the model's.
 * A fresh test set must not reuse those traces: its trips come from
   ``make_trips(n, seed=FRESH_BASE + s)`` with ``trip_id`` offset by
   :data:`TRIP_ID_OFFSET`, and its energies are built by :func:`truth_energy`,
@@ -16,6 +19,8 @@ Part of ``evaluation/uncertainty/uncertainty.py`` (not imported by the library).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pandas as pd
@@ -29,8 +34,18 @@ from hybridev.physics.truth import (
     make_dataset,
 )
 
-__all__ = ["N_FIT", "N_TOTAL", "TRIP_ID_OFFSET", "check_recipe", "conformal_split",
-           "fresh_dataset", "paper_split", "truth_energy"]
+__all__ = ["N_FIT", "N_TOTAL", "PHYSICS_SEED_OFFSET", "TRIP_ID_OFFSET", "TRUTH_VEHICLE",
+           "check_recipe", "conformal_split", "fresh_dataset", "paper_split", "truth_energy"]
+
+TRUTH_VEHICLE = dataclasses.replace(
+    VehicleParams(), mass_kg=VehicleParams().mass_kg * 1.08,
+    drag_coefficient=VehicleParams().drag_coefficient * 1.10,
+    rolling_resistance_coef=VehicleParams().rolling_resistance_coef * 1.10,
+    source="evaluation truth: the paper's vehicle, mass +8 %, drag and rolling +10 %")
+"""The truth's car (the models keep the paper's nominal vehicle)."""
+
+PHYSICS_SEED_OFFSET = 500
+"""The models of seed ``s`` synthesise their own speed traces with ``physics_seed = 500 + s``."""
 
 N_TOTAL, N_FIT = 1500, 1275
 """Paper protocol: 1,500 trips, 1,275 to fit (1,050 train + 225 validation), 225 test."""
@@ -52,7 +67,7 @@ def truth_energy(trips: pd.DataFrame, truth: str, trace_seed: int, noise_key) ->
     ``trace_seed`` is simulate's seed (traces keyed by ``trip_id``); ``noise_key``
     seeds ``numpy.random.default_rng`` for ``eta``.
     """
-    sim = simulate(trips, n_steps=1000, seed=int(trace_seed))
+    sim = simulate(trips, TRUTH_VEHICLE, n_steps=1000, seed=int(trace_seed))
     ep = sim["energy_kwh_physics"].to_numpy(float)
     n = len(trips)
     rng = np.random.default_rng(noise_key)
@@ -62,7 +77,7 @@ def truth_energy(trips: pd.DataFrame, truth: str, trace_seed: int, noise_key) ->
         mean = ep
     else:
         eta = STRUCTURED_NOISE_SIGMA * rng.standard_normal(n)
-        mean = ep * (1.0 + effect_breakdown(sim)["total"].to_numpy(float))
+        mean = ep * (1.0 + effect_breakdown(sim, vehicle=TRUTH_VEHICLE)["total"].to_numpy(float))
     return np.maximum(mean, 0.0) * np.maximum(1.0 + eta, MIN_NOISE_FACTOR)
 
 
@@ -83,7 +98,7 @@ def check_recipe(dataset: pd.DataFrame, truth: str, seed: int) -> None:
 
 def dataset(truth: str, seed: int) -> pd.DataFrame:
     """The paper-protocol dataset of one seed (recipe checked)."""
-    ds = make_dataset(N_TOTAL, truth=truth, seed=seed)
+    ds = make_dataset(N_TOTAL, truth=truth, seed=seed, vehicle=TRUTH_VEHICLE)
     check_recipe(ds, truth, seed)
     return ds
 

@@ -1,9 +1,10 @@
 """Experiments 1 (methods before/after conformal) and 2 (shift) for one truth and seed.
 
 Part of ``evaluation/uncertainty/uncertainty.py``. Per seed ``s`` (all models with
-``physics_seed=s`` and ``fit(..., seed=s)``):
+``physics_seed=uq_data.PHYSICS_SEED_OFFSET + s`` and ``fit(..., seed=s)``):
 
-* fit: 1,275 of ``make_dataset(1500, truth, seed=s)``; test: the other 225
+* fit: 1,275 of ``make_dataset(1500, truth, seed=s, vehicle=uq_data.TRUTH_VEHICLE)``;
+  test: the other 225
   ("split") and a fresh set (:func:`uq_data.fresh_dataset`, "fresh");
 * ``combined``: ``HybridModel()`` defaults, ``conformal_fraction`` 0 (before)
   and 0.15 (after);
@@ -48,7 +49,8 @@ SHIFTS = {
 def _fit(warn_log: list, data: pd.DataFrame, seed: int, **kw) -> HybridModel:
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
-        m = HybridModel(physics_seed=seed, **kw).fit(data, seed=seed)
+        m = HybridModel(physics_seed=uq_data.PHYSICS_SEED_OFFSET + seed, **kw).fit(
+            data, seed=seed)
     warn_log.extend(f"{type(x.message).__name__}: {x.message}" for x in w
                     if not issubclass(x.category, DeprecationWarning))
     return m

@@ -410,13 +410,15 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         f"* {cfg['seeds']} seeds per truth (`paper`: the paper's i.i.d. noise; `structured`: "
         f"learnable effects plus {100 * noise_sigma('structured'):.1f} % noise; "
         "`hybridev.physics.truth`). Seed `s`: "
-        "`make_dataset(1500, truth, seed=s)` split at random into 1,275 fit and 225 test "
+        "`make_dataset(1500, truth, seed=s, vehicle=TRUTH_VEHICLE)` (the truth's own car: the "
+        "paper's vehicle with mass +8 %, drag and rolling resistance +10 %) split at random "
+        "into 1,275 fit and 225 test "
         f"trips (\"split\"), plus a fresh test set of {cfg['n_fresh']:,} trips (\"fresh\"): "
         "new conditions (`make_trips(n, seed=10000 + s)`), new trip keys (`trip_id` + "
         "1,000,000, so new speed traces), new noise, same truth and trace seed; its energies "
         "follow `make_dataset`'s recipe, asserted to reproduce `make_dataset` exactly on each "
-        "seed's training data. Every model uses `physics_seed = s`, so its physics sees the "
-        "truth's traces.",
+        "seed's training data. Every model uses `physics_seed = 500 + s` and the paper's "
+        "nominal vehicle, so neither the truth's speed traces nor its car are the model's.",
         "* Methods: **posterior** (physics posterior predictive: `calibrate_physics` draws "
         "with their inferred relative noise; the posteriors are those fitted inside the "
         "combined models), **ensemble** (`HybridModel(calibrate_physics=False)`), "
