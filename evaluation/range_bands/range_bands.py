@@ -49,7 +49,6 @@ Set-up
 
 from __future__ import annotations
 
-import dataclasses
 import datetime as _dt
 import sys
 import time
@@ -78,17 +77,15 @@ from hybridev.physics.truth import (
     make_dataset,
 )
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "shift_and_small_data"))
+from shift_and_small_data import TRUTH_VEHICLE
+
 ROOT = Path(__file__).resolve().parents[2]
 OUT_MD = ROOT / "evaluation" / "range_bands" / "range_bands.md"
 FIG_DIR = ROOT / "evaluation" / "range_bands" / "figures"
 SEED, N_TRAIN, N_COND, RESERVE = 0, 1500, 1500, 0.1
 TRUTH_SEED = 100
 """The truth's trips and speed traces (the model's physics uses ``physics_seed=0``)."""
-TRUTH_VEHICLE = dataclasses.replace(
-    hybridev.VehicleParams(), mass_kg=hybridev.VehicleParams().mass_kg * 1.08,
-    drag_coefficient=hybridev.VehicleParams().drag_coefficient * 1.10,
-    rolling_resistance_coef=hybridev.VehicleParams().rolling_resistance_coef * 1.10,
-    source="evaluation truth: the paper's vehicle, mass +8 %, drag and rolling +10 %")
 COND_SEED, KEY0 = 101, 100_000
 WIDE_KM = (20.0, 700.0)
 TRUTH_GRID = np.geomspace(0.4, 2.5, 75)

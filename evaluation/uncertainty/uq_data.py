@@ -20,7 +20,8 @@ Part of ``evaluation/uncertainty/uncertainty.py`` (not imported by the library).
 
 from __future__ import annotations
 
-import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -34,15 +35,12 @@ from hybridev.physics.truth import (
     make_dataset,
 )
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "shift_and_small_data"))
+from shift_and_small_data import TRUTH_VEHICLE
+
 __all__ = ["N_FIT", "N_TOTAL", "PHYSICS_SEED_OFFSET", "TRIP_ID_OFFSET", "TRUTH_VEHICLE",
            "check_recipe", "conformal_split", "fresh_dataset", "paper_split", "truth_energy"]
 
-TRUTH_VEHICLE = dataclasses.replace(
-    VehicleParams(), mass_kg=VehicleParams().mass_kg * 1.08,
-    drag_coefficient=VehicleParams().drag_coefficient * 1.10,
-    rolling_resistance_coef=VehicleParams().rolling_resistance_coef * 1.10,
-    source="evaluation truth: the paper's vehicle, mass +8 %, drag and rolling +10 %")
-"""The truth's car (the models keep the paper's nominal vehicle)."""
 
 PHYSICS_SEED_OFFSET = 500
 """The models of seed ``s`` synthesise their own speed traces with ``physics_seed = 500 + s``."""
