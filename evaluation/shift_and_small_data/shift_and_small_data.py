@@ -172,7 +172,7 @@ def _size_rows(setup, vehicle, size, rep, x, y, only_default=False) -> list[dict
     train = truth(size, 100 + rep)
     default_mode = "cv+" if size < CV_PLUS_MAX_TRIPS else "split"  # what "auto" picks
     modes = ("split", "cv+", "mondrian") if size >= 40 else ("split", "cv+")
-    if vehicle is None or only_default:  # the comparison set-up: its default mode only
+    if vehicle is None or only_default:  # paper preset, or a draw past OTHER_MODE_SEEDS
         modes = (default_mode,)
     rows = []
     for mode in modes:
