@@ -146,7 +146,8 @@ def weekly_spread_parts(d, truth_week_kwh: float) -> tuple[float, float, float]:
     """The model's weekly-total spread by part, each as a fraction of the truth's weekly mean.
 
     Physics posterior draw and ensemble member (shared by every trip of the week) and
-    the members' noise (independent between trips), each scaled by the conformal factor.
+    the members' noise (independent between trips), each scaled by the conformal factor
+    (its mean over the trips where out-of-domain trips have their own).
     """
     c = float(np.mean(d.spread_factor))
     phys = c * d.physics_draws_kwh.sum(axis=1).std()

@@ -392,6 +392,11 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
     v = _V(R.agg(pd.DataFrame(res["rows"])))
     warn = pd.Series(res["warnings"], dtype=object).str.split(":").str[0].value_counts()
     warn_txt = ", ".join(f"{k}: {n}" for k, n in warn.items()) or "none"
+    # each distinct message once, cut after its first clause (the value and the allowed range)
+    heads = pd.Series([w.split(": ", 1)[-1].split("):")[0] + ")" if "):" in w
+                       else w.split(": ", 1)[-1][:120] for w in res["warnings"]],
+                      dtype=object).value_counts()
+    warn_list = [f"  * {n} x {h}" for h, n in heads.items()]
     lines = [
         "# Does the uncertainty hold? Intervals, confidence, shift and parameter recovery",
         "",
@@ -436,7 +441,9 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         f"(resp. 120 km/h). Recovery: {res['recovery_info']['n_seeds']} seeds x 300 "
         "simulated trips with parameters drawn from the prior (`evaluation/uncertainty/uq_recovery.py`).",
         f"* Warnings while fitting: {warn_txt}; ConvergenceWarnings in the recovery study: "
-        f"{res['recovery_info']['warnings']}.",
+        f"{res['recovery_info']['warnings']}." + (" The fitting warnings, by message:" if warn_list
+                                                 else ""),
+        *warn_list,
         "",
         "## Targets",
         "",
