@@ -84,10 +84,11 @@ TRUTH_VEHICLE = dataclasses.replace(
     rolling_resistance_coef=VehicleParams().rolling_resistance_coef * 1.10,
     source="evaluation truth: the paper's vehicle, mass +8 %, drag and rolling +10 %")
 _NOMINAL = VehicleParams()
-NEW_USER_VEHICLE = VehicleParams.from_coastdown(
-    _NOMINAL.rolling_resistance_coef * _NOMINAL.mass_kg * 9.81,  # A, N
-    _NOMINAL.linear_drag_n_per_mps / 3.6,  # B, N/(km/h)
-    0.5 * 1.225 * _NOMINAL.drag_coefficient * _NOMINAL.frontal_area_m2 / 3.6**2,  # C
+NEW_USER_VEHICLE = VehicleParams.from_coastdown(  # A (N), B (N/(km/h)), C (N/(km/h)^2)
+    _NOMINAL.rolling_resistance_coef * _NOMINAL.mass_kg * _NOMINAL.gravity_mps2,
+    _NOMINAL.linear_drag_n_per_mps / 3.6,
+    0.5 * _NOMINAL.air_density_kg_m3 * _NOMINAL.drag_coefficient * _NOMINAL.frontal_area_m2
+    / 3.6**2,
     _NOMINAL.mass_kg, battery_capacity_kwh=_NOMINAL.battery_capacity_kwh)
 """The new user's set-up: ``from_coastdown`` with the nominal (not the truth's) road load."""
 SETUPS = {"new user": NEW_USER_VEHICLE, "paper preset": None}

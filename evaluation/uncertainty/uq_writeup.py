@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import uq_data
 import uq_report as R
 
 from hybridev.physics.oracle import noise_floor_pct
@@ -387,15 +388,18 @@ def _shift_factors(s: pd.DataFrame) -> list[tuple[str, str, float, float]]:
     return out
 
 
+def _warning_head(warning: str) -> str:
+    """A ``"Type: message"`` warning cut after its first clause (the value and its range)."""
+    msg = warning.split(": ", 1)[-1]
+    return msg.split("):")[0] + ")" if "):" in msg else msg[:120]
+
+
 def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
     cfg = meta["cfg"]
     v = _V(R.agg(pd.DataFrame(res["rows"])))
     warn = pd.Series(res["warnings"], dtype=object).str.split(":").str[0].value_counts()
     warn_txt = ", ".join(f"{k}: {n}" for k, n in warn.items()) or "none"
-    # each distinct message once, cut after its first clause (the value and the allowed range)
-    heads = pd.Series([w.split(": ", 1)[-1].split("):")[0] + ")" if "):" in w
-                       else w.split(": ", 1)[-1][:120] for w in res["warnings"]],
-                      dtype=object).value_counts()
+    heads = pd.Series([_warning_head(w) for w in res["warnings"]], dtype=object).value_counts()
     warn_list = [f"  * {n} x {h}" for h, n in heads.items()]
     lines = [
         "# Does the uncertainty hold? Intervals, confidence, shift and parameter recovery",
@@ -422,7 +426,8 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         "new conditions (`make_trips(n, seed=10000 + s)`), new trip keys (`trip_id` + "
         "1,000,000, so new speed traces), new noise, same truth and trace seed; its energies "
         "follow `make_dataset`'s recipe, asserted to reproduce `make_dataset` exactly on each "
-        "seed's training data. Every model uses `physics_seed = 500 + s` and the paper's "
+        f"seed's training data. Every model uses `physics_seed = {uq_data.PHYSICS_SEED_OFFSET} + s` "
+        "and the paper's "
         "nominal vehicle, so neither the truth's speed traces nor its car are the model's.",
         "* Methods: **posterior** (physics posterior predictive: `calibrate_physics` draws "
         "with their inferred relative noise; the posteriors are those fitted inside the "
