@@ -38,6 +38,8 @@ import pandas as pd
 import torch
 
 from hybridev import HybridModel, make_trips
+from hybridev.learning.inputs import validate_prediction_trips
+from hybridev.learning.pipeline import physics_draws
 from hybridev.physics.stats import energy_from_stats
 
 TARGETS = {"interval_s": 1.0, "train5_s": 90.0}
@@ -87,21 +89,21 @@ def main(argv=None) -> int:
         "interval_cvplus":
             bench.timed_cpu(lambda: cvplus.predict_interval(batch), args.repeats),
     }
-    valid = model._validated(batch)
+    valid = validate_prediction_trips(batch)
     stats = post.stats_for(valid)
     params = post.as_params(np.vstack([np.median(post.samples, axis=0),
                                        post.sample(model.n_posterior_draws, 0)]))
-    table, _ = model._posterior_physics(valid, 0, 0)
-    x = model._features(table)
+    table = physics_draws(model, valid)[0]
+    x = model.learner_.features(table, model.domain_)
     parts = {
         "trip validation (`validate_prediction_trips`)":
-            bench.timed_cpu(lambda: model._validated(batch), args.repeats),
+            bench.timed_cpu(lambda: validate_prediction_trips(batch), args.repeats),
         "trace synthesis + sufficient statistics (`stats_for`)":
             bench.timed_cpu(lambda: post.stats_for(valid), args.repeats),
         "physics energies, median + 200 draws (`energy_from_stats`)":
             bench.timed_cpu(lambda: energy_from_stats(stats, params), args.repeats),
-        "network, 5 members (`_residual_moments`)":
-            bench.timed_cpu(lambda: model._residual_moments(x), args.repeats),
+        "network, 5 members (`ResidualLearner.moments`)":
+            bench.timed_cpu(lambda: model.learner_.moments(x), args.repeats),
     }
     med = {k: (float(np.median(w)), float(np.median(c))) for k, (w, c) in t.items()}
     med_parts = {k: (float(np.median(w)), float(np.median(c))) for k, (w, c) in parts.items()}

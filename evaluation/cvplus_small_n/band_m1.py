@@ -30,6 +30,7 @@ import shift_and_small_data as ssd  # the M1 loader, folds and picks
 from study_io import run_study, write_markdown  # command line and JSON output
 
 from hybridev import HybridModel
+from hybridev.learning.pipeline import raw_distributions
 
 HERE = Path(__file__).resolve().parent
 SIZES = (20, 40)
@@ -80,8 +81,9 @@ def run(root: Path) -> list[dict]:
 
 def _moments(model: HybridModel, test, seed: int):
     """Fold models' predictive means and spreads on ``test`` (MeasuredTrips, its traces)."""
-    _, d = model._distributions(test.trips, seed=seed, traces=test.traces,
-                                nets=tuple(model._cv_nets()), physics=tuple(model.cv_physics_))
+    d = raw_distributions(model, test.trips, test.traces, seed=seed,
+                          nets=tuple(model.calibrator_.folds()),
+                          physics=tuple(model.cv_physics_))[0]
     mu = np.stack([q.mean() for q in d])
     return mu, np.maximum(np.stack([q.std() for q in d]), 1e-12)
 

@@ -61,6 +61,7 @@ import shift_and_small_data as ssd  # the truth and set-up of the size study
 import hybridev.learning.cvplus as cvplus
 from hybridev import HybridModel
 from hybridev.core.fileio import atomic_path
+from hybridev.learning.pipeline import raw_distributions
 
 HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
@@ -83,9 +84,9 @@ def _edge(train, fold: np.ndarray) -> np.ndarray:
 def decompose(model: HybridModel, x, y: np.ndarray, seed: int, train) -> dict:
     out = model.predict_interval(x, LEVEL, seed=seed)
     ok = out["in_domain"].to_numpy(bool)
-    cv = model._cv_nets()
+    cv = model.calibrator_.folds()
     phys = (getattr(model, "cv_physics_", None) or [None] * len(cv))
-    _, dists = model._distributions(x, seed=seed, nets=(None, *cv), physics=(None, *phys))
+    dists = raw_distributions(model, x, seed=seed, nets=(None, *cv), physics=(None, *phys))[0]
     mu, sd = dists[0].mean(), dists[0].std()
     fm = np.stack([d.mean() for d in dists[1:]])
     fs = np.maximum(np.stack([d.std() for d in dists[1:]]), 1e-12)

@@ -26,7 +26,7 @@ library scores its training trips. Same truth as ``shift_and_small_data``
    both sides (the method's guarantee is only ``1 - 2 alpha``).
 
 Writes ``exchangeability.md`` and ``.json`` to ``--out`` (default: this folder).
-Uses the private ``HybridModel._distributions`` and ``_cv_nets``.
+Uses :func:`hybridev.learning.pipeline.raw_distributions` and the calibrator's folds.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ import shift_and_small_data as ssd  # the truth of the size study
 
 from hybridev import HybridModel
 from hybridev.core.fileio import atomic_path
+from hybridev.learning.pipeline import raw_distributions
 
 HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
@@ -73,7 +74,7 @@ def same_call(draws: int) -> list[dict]:
 
 def _scores(model: HybridModel, table, nets, physics, seed: int):
     x = table.drop(columns=["energy_kwh", "soc_final"])
-    _, dists = model._distributions(x, seed=seed, nets=tuple(nets), physics=tuple(physics))
+    dists = raw_distributions(model, x, seed=seed, nets=tuple(nets), physics=tuple(physics))[0]
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
     return mu, sd
@@ -86,7 +87,7 @@ def loo(draws: int) -> list[dict]:
         y = train["energy_kwh"].to_numpy(float)
         model = HybridModel(conformal="cv+", cv_folds=N).fit(train, seed=rep)
         fold = model.conformal_.fold
-        mu, sd = _scores(model, train, model._cv_nets(), model.cv_physics_, rep)
+        mu, sd = _scores(model, train, model.calibrator_.folds(), model.cv_physics_, rep)
         for j in range(N):
             alone = HybridModel(conformal_fraction=0.0).fit(train.drop(index=j), seed=1000 + j)
             m1, s1 = _scores(alone, train.iloc[[j]], [None], [None], rep)

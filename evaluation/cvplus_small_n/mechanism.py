@@ -48,7 +48,7 @@ E. **Is it how CV+ combines the fold models?** The same 20 out-of-fold scores an
    out-of-domain widening), and the share flagged out of the domain.
 
 Writes ``mechanism.md`` and ``.json`` to ``--out`` (default: this folder). Uses the
-private ``HybridModel._distributions``, ``_distribution`` and ``_cv_nets``.
+raw distributions of :func:`hybridev.learning.pipeline.raw_distributions`.
 """
 
 from __future__ import annotations
@@ -70,6 +70,7 @@ from hybridev import HybridModel
 from hybridev.core.fileio import atomic_path
 from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.mondrian import TEMPERATURE_BANDS_C
+from hybridev.learning.pipeline import raw_distributions
 
 HERE = Path(__file__).resolve().parent
 LEVEL = 0.9
@@ -101,8 +102,8 @@ def _iid_draw(rep: int):
 
 def _fold_moments(model: HybridModel, x, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Predictive means and spreads of each fold model on ``x``, (n_folds, n_trips)."""
-    _, d = model._distributions(x, seed=seed, nets=tuple(model._cv_nets()),
-                                physics=tuple(model.cv_physics_))
+    d = raw_distributions(model, x, seed=seed, nets=tuple(model.calibrator_.folds()),
+                          physics=tuple(model.cv_physics_))[0]
     mu = np.stack([q.mean() for q in d])
     return mu, np.maximum(np.stack([q.std() for q in d]), 1e-12)
 
@@ -185,7 +186,7 @@ def _aggregation(model: HybridModel, cp: CVPlusConformal, x, y: np.ndarray, ok: 
     out["E_per_fold"] = (per.mean(axis=0), 2 * q * sd.mean(axis=0))
     mb, sb = mu.mean(axis=0), sd.mean(axis=0)
     out["E_fold_mean"] = (np.abs(y - mb) <= q * sb, 2 * q * sb)
-    _, d = model._distribution(x, seed=rep)
+    d = raw_distributions(model, x, seed=rep)[0][0]
     mf, sf = d.mean(), np.maximum(d.std(), 1e-12)
     out["E_final"] = (np.abs(y - mf) <= q * sf, 2 * q * sf)
     # Vovk's cross-conformal set {y: (1 + #{i: |r_i| >= score of y under fold k(i)}) / (n + 1)
@@ -234,9 +235,9 @@ def refit_draw(rep: int) -> dict:
             rest = train[fold != k].reset_index(drop=True)
             held = train[fold == k]
             model = HybridModel(conformal_fraction=0.0).fit(rest, seed=10 * rep + k)
-            _, dt = model._distribution(x, seed=rep)
-            _, dh = model._distribution(held.drop(columns=["energy_kwh", "soc_final"]),
-                                        seed=rep)
+            dt = raw_distributions(model, x, seed=rep)[0][0]
+            dh = raw_distributions(model, held.drop(columns=["energy_kwh", "soc_final"]),
+                                   seed=rep)[0][0]
             st = np.abs(y - dt.mean()) / np.maximum(dt.std(), 1e-12)
             sh = np.abs(held["energy_kwh"].to_numpy(float) - dh.mean()) / np.maximum(dh.std(),
                                                                                      1e-12)

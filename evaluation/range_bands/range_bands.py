@@ -70,6 +70,7 @@ from hybridev.apps.range import (
 )
 from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 from hybridev.core.fileio import atomic_path
+from hybridev.learning.pipeline import physics_draws
 from hybridev.physics.truth import (
     MIN_NOISE_FACTOR,
     STRUCTURED_NOISE_SIGMA,
@@ -289,9 +290,9 @@ def main() -> int:
 
     # physics along distance: scaling a 100 km trip vs the anchors of predict_range
     r50 = pred["range_km_q50"].to_numpy()
-    k_at = model._physics(cond.assign(distance_km=r50, soc_initial=s0))[
+    k_at = physics_draws(model, cond.assign(distance_km=r50, soc_initial=s0))[0][
         "kwh_per_km_physics"].to_numpy()
-    k_100 = model._physics(cond.assign(distance_km=100.0, soc_initial=s0))[
+    k_100 = physics_draws(model, cond.assign(distance_km=100.0, soc_initial=s0))[0][
         "kwh_per_km_physics"].to_numpy()
     _, (knots, k_med, _, _), _ = _range_curve(model, _check_conditions(cond), s0,
                                              pred["budget_kwh"].to_numpy(), SEED)

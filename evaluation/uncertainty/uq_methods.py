@@ -30,6 +30,7 @@ from scipy.special import ndtri
 from hybridev import metrics as M
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.physical import energy_floor_kwh
+from hybridev.learning.pipeline import ood_sd
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 
 __all__ = ["LEVELS", "TABLE_LEVELS", "Bands", "check_against_predict_interval", "evaluate",
@@ -99,7 +100,7 @@ def model_bands(model, trips: pd.DataFrame, y: np.ndarray, seed: int) -> Bands:
     bound capped at the point prediction.
     """
     cp = getattr(model, "conformal_", None)
-    if model._cv_nets() or getattr(model, "mondrian", False):
+    if model.calibrator_.folds() or getattr(model, "mondrian", False):
         raise ValueError("model_bands reproduces split-conformal intervals only; this model "
                          "uses CV+ or Mondrian calibration (fit on >= 250 trips, "
                          "conformal='split', mondrian=False)")
@@ -119,8 +120,8 @@ def model_bands(model, trips: pd.DataFrame, y: np.ndarray, seed: int) -> Bands:
         lo_one = np.stack([cp.lower_bound(mu, sd, lv) for lv in LEVELS])
     point = np.maximum(mu, floor)
     lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)
-    _, ok, sd_ood = model._ood_sd(table[[c for c in table.columns if c not in _PRED_COLUMNS]],
-                                  mu, sd, raw.physics_draws_kwh.var(axis=0))
+    _, ok, sd_ood = ood_sd(model, table[[c for c in table.columns if c not in _PRED_COLUMNS]],
+                           mu, sd, raw.physics_draws_kwh.var(axis=0))
     z2, z1 = ndtri(0.5 + LEVELS / 2.0)[:, None], ndtri(LEVELS)[:, None]
     lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
     hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))

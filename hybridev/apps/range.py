@@ -100,6 +100,7 @@ from hybridev.learning.physical import (
     floor_along,
     floor_per_km,
 )
+from hybridev.learning.pipeline import ood_sd, physics_draws
 from hybridev.learning.predictive import EnergyDistribution
 from hybridev.physics.kinematics import trace_keys
 from hybridev.physics.validation import TRIP_RULES, check_table
@@ -226,11 +227,11 @@ def _anchor_physics(model: HybridModel, cond, s0, anchors_km, seed: int):
     n, k = anchors_km.shape
     rows = _rows(cond, s0, anchors_km)
     if hasattr(model, "net_") and getattr(model, "posterior_", None) is not None:
-        table, draws = model._posterior_physics(model._validated(rows),
-                                                int(model.n_posterior_draws), int(seed))
+        table, draws = physics_draws(model, rows, n_draws=int(model.n_posterior_draws),
+                                     seed=int(seed))
         sd = draws.std(axis=0)
     else:
-        table = model._physics(rows)
+        table = physics_draws(model, rows)[0]
         sd = np.zeros(len(table))
     d = anchors_km.ravel()
     e = table["energy_kwh_physics"].to_numpy(float)
@@ -283,7 +284,9 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
         return np.broadcast_to(e_med, (len(probs), *r.shape)), e_med
     n, g = r.shape
     names = model.feature_names_
-    x = np.repeat(model._features(base)[:, None, :], g, axis=1)
+    learner = model.learner_
+    x = np.repeat(learner.features(base, getattr(model, "domain_", None))[:, None, :], g,
+                  axis=1)
     r_held = distance_hold(model, r)  # the networks see the training distances only
     vary = {"distance_km": r_held, "max_speed_kmh": _interp_log(knots, vmax, r),
             "energy_kwh_physics": kpk * r_held, "kwh_per_km_physics": kpk}
@@ -293,10 +296,10 @@ def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, cur
             x[:, :, j] = (val - model.feature_mean_[j]) / model.feature_std_[j]
     factor = (np.ones_like(r) if model.residual_target == "relative" and model._residual
               else r / r_held)  # absolute residual: held per km
-    if getattr(model, "domain_", None) is not None:  # as model._features: no extrapolation
+    if getattr(model, "domain_", None) is not None:  # as learner.features: no extrapolation
         x = model.domain_.clip_features(x)
-    mean, var = model._residual_moments(
-        x.reshape(n * g, -1), model._target_scale(e_med.ravel(), r.ravel()) * factor.ravel())
+    mean, var = learner.moments(
+        x.reshape(n * g, -1), learner.target_scale(e_med.ravel(), r.ravel()) * factor.ravel())
     std = np.full_like(mean, _MIN_STD_KWH) if var is None else np.sqrt(var)
     std = np.maximum(std, _MIN_STD_KWH)
     if model._residual:
@@ -367,8 +370,8 @@ def _ood_ratio(model, base: pd.DataFrame, r: np.ndarray, e_med: np.ndarray,
     rep = base.iloc[np.repeat(np.arange(n), g)].reset_index(drop=True).assign(
         distance_km=np.minimum(r.ravel(), d_max), energy_kwh_physics=e_med.ravel())
     sd = np.maximum(dist.std(), 1e-12)
-    _, ok, sd_ood = model._ood_sd(rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0),
-                                  dist=dist)
+    _, ok, sd_ood = ood_sd(model, rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0),
+                           dist=dist)
     return np.where(ok, 0.0, sd_ood / sd)
 
 

@@ -28,6 +28,7 @@ from hybridev.data.measured import validate_measured_trips
 from hybridev.learning.features import FEATURE_NAMES, PHYSICS_FEATURES, mode_one_hot
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.model import HybridModel
+from hybridev.learning.params import feature_names
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["PAPER_CONSTANT_RATE_KWH_PER_KM", "ConstantRate", "LinearBaseline", "PhysicsOnly",
@@ -203,7 +204,7 @@ class PhysicsOnly(_Baseline):
 
     def _output(self, t: pd.DataFrame) -> pd.DataFrame:
         return HybridModel(self.vehicle, n_steps=self.n_steps,
-                           physics_seed=self.physics_seed)._physics(t)
+                           physics_seed=self.physics_seed).physics_stage().table(t)
 
     def _energy(self, trips: pd.DataFrame) -> np.ndarray:
         return trips["energy_kwh_physics"].to_numpy(float)
@@ -236,7 +237,7 @@ class PureML(HybridModel):
 
     def _check_params(self) -> None:
         super()._check_params()
-        used = [f for f in self._feature_names() if f in PHYSICS_FEATURES]
+        used = [f for f in feature_names(self) if f in PHYSICS_FEATURES]
         if used:
-            raise ValueError(f"PureML.features={list(self._feature_names())!r} must not "
+            raise ValueError(f"PureML.features={list(feature_names(self))!r} must not "
                              f"contain the physics features {used!r}")

@@ -5,7 +5,9 @@ The trips are split into ``cv_folds`` folds of whole groups
 trained on the other folds (with its own group-aware early-stopping share),
 and the trips of the fold are scored by it. The scores and the fold ensembles
 make the :class:`hybridev.learning.conformal.CVPlusConformal` predictor; the
-final ensemble ``net_`` (trained on every trip) gives the point prediction.
+final ensemble ``net_`` (trained on every trip) gives the point prediction. The
+:class:`~hybridev.learning.calibrate.Calibrator` holds the fold ensembles, their physics
+and the scores.
 
 Each fold also gets its own physics: a posterior sampled on the other folds'
 trips only, and its own discrepancy stage (:mod:`hybridev.bayes.discrepancy`),
@@ -42,7 +44,7 @@ from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.core.errors import CalibrationWarning, ConvergenceWarning
 from hybridev.learning.conformal import CVPlusConformal, min_calibration_trips
 from hybridev.learning.features import trip_features
-from hybridev.learning.nn import EnsembleMLP
+from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
 __all__ = ["FOLD_POSTERIOR_STEPS", "MIN_GROUPS", "fit_cv_plus", "nets_from_arrays",
@@ -56,14 +58,22 @@ MIN_GROUPS = 5
 poorly determined whatever the number of trips)."""
 
 
-def fit_cv_plus(model, good, traces, codes: np.ndarray, xs: np.ndarray, ys: np.ndarray,
-                e_meas: np.ndarray, seed: int, ss: np.random.SeedSequence) -> None:
-    """Train the fold ensembles of ``model`` and set ``cv_nets_`` and ``conformal_``.
+def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.ndarray,
+                xs: np.ndarray, ys: np.ndarray, e_meas: np.ndarray, seed: int,
+                ss: np.random.SeedSequence, *, cv_folds: int, val_fraction: float
+                ) -> tuple[list, list, CVPlusConformal]:
+    """Train the fold ensembles: ``(fold_nets, fold_physics, conformal)``.
 
     Parameters
     ----------
-    model : HybridModel
-        With ``net_``, standardisation and (optionally) ``posterior_`` fitted.
+    physics : PhysicsStage
+        Fitted (its ``posterior_`` optional).
+    learner : ResidualLearner
+        With its standardisation fitted.
+    raw_distributions : callable
+        ``(trips, traces, seed, nets, physics) -> list of EnergyDistribution``: the raw
+        predictive distributions of ``trips`` from each fold's ensemble and physics (the
+        model's predictive path up to the distribution builder).
     good : pandas.DataFrame, (n_trips, ...)
         The validated measured trips.
     traces : LoggedTraces or None
@@ -76,56 +86,54 @@ def fit_cv_plus(model, good, traces, codes: np.ndarray, xs: np.ndarray, ys: np.n
         Fit seed (posterior draws of the scoring).
     ss : numpy.random.SeedSequence
         Seeds the folds, the early-stopping shares and the fold trainings.
+    cv_folds : int
+    val_fraction : float
+        Early-stopping share of each fold's training trips.
     """
     split_ss, torch_ss = ss.spawn(2)
     rng = np.random.default_rng(split_ss)
-    fold = group_kfold(codes, int(model.cv_folds), rng)
+    fold = group_kfold(codes, int(cv_folds), rng)
     k = int(fold.max()) + 1
     seeds = torch_ss.generate_state(k)
-    post = getattr(model, "posterior_", None)
+    post = physics.posterior_
     if post is not None:
-        valid = model._validated(good)
-        stats = model._stats(valid, traces)
-    nets, physics = [], []
+        valid = validate_prediction_trips(good)
+        stats = physics.stats(valid, traces)
+    nets, fold_physics = [], []
     for f in range(k):  # cv_folds trainings (5 by default)
         rest = np.flatnonzero(fold != f)
         val = np.zeros(len(rest), dtype=bool)
-        if model.val_fraction > 0:
-            val = group_holdout(codes[rest], model.val_fraction, rng)
+        if val_fraction > 0:
+            val = group_holdout(codes[rest], val_fraction, rng)
         tr = rest[~val] if (~val).any() else rest
         xs_f, ys_f, phys = xs, ys, None
         if post is not None:  # this fold's own posterior and discrepancy
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
-                phys = model._calibrate(good.iloc[rest], int(seeds[f]) % 2**32, traces,
-                                        sign_vehicle=post.reference_vehicle,
-                                        n_steps=FOLD_POSTERIOR_STEPS)
-            table, _ = model._posterior_physics(valid, 0, 0, physics=phys, stats=stats,
-                                                fade=None)  # training trips: in the domain
-            xs_f, ys_f = _training_arrays(model, table, e_meas)
-        net, _ = model._train_net(xs_f, ys_f, tr, rest[val] if (~val).any() else rest[:0],
-                                  int(seeds[f]))
+                phys = physics.calibrated(good.iloc[rest], int(seeds[f]) % 2**32, traces,
+                                          sign_vehicle=post.reference_vehicle,
+                                          n_steps=FOLD_POSTERIOR_STEPS)
+            table, _ = physics.posterior_table(valid, 0, 0, physics=phys, stats=stats,
+                                               fade=None)  # training trips: in the domain
+            xs_f, ys_f = _training_arrays(learner, table, e_meas)
+        net, _ = learner.train(xs_f, ys_f, tr, rest[val] if (~val).any() else rest[:0],
+                               int(seeds[f]))
         nets.append(net)
-        physics.append(phys)
-    _, dists = model._distributions(good, seed=int(seed), traces=traces, nets=nets,
-                                    physics=physics)
+        fold_physics.append(phys)
+    dists = raw_distributions(good, traces, int(seed), nets, fold_physics)
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
     idx = np.arange(len(e_meas))
-    model.cv_nets_ = nets
-    model.cv_physics_ = physics if post is not None else []
-    model.conformal_ = CVPlusConformal((e_meas - mu[fold, idx]) / sd[fold, idx], fold)
+    return (nets, fold_physics if post is not None else [],
+            CVPlusConformal((e_meas - mu[fold, idx]) / sd[fold, idx], fold))
 
 
-def _training_arrays(model, table, e_meas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _training_arrays(learner, table, e_meas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Standardised inputs and residual targets against a fold's physics table."""
-    x = trip_features(table, model.feature_names_)
+    x = trip_features(table, learner.feature_names)
     e_p = table["energy_kwh_physics"].to_numpy(float)
-    scale = model._target_scale(e_p, table["distance_km"].to_numpy(float))
-    y = (e_meas - e_p) / scale
-    xs = ((x - model.feature_mean_) / model.feature_std_).astype(np.float32)
-    ys = ((y - model.target_mean_) / model.target_std_).astype(np.float32)
-    return xs, ys
+    scale = learner.target_scale(e_p, table["distance_km"].to_numpy(float))
+    return learner.scaled(x, (e_meas - e_p) / scale)
 
 
 def physics_to_arrays(physics) -> dict[str, np.ndarray]:
@@ -141,11 +149,11 @@ def physics_to_arrays(physics) -> dict[str, np.ndarray]:
     return out
 
 
-def physics_from_arrays(model, arrays: dict[str, np.ndarray], n_folds: int) -> list:
-    """The folds' physics from :func:`physics_to_arrays` (sharing ``model.posterior_``'s metadata)."""
-    if "cv0.posterior_samples" not in arrays:
+def physics_from_arrays(posterior, arrays: dict[str, np.ndarray], n_folds: int) -> list:
+    """The folds' physics from :func:`physics_to_arrays` (sharing ``posterior``'s metadata)."""
+    if "cv0.posterior_samples" not in arrays or posterior is None:
         return []
-    base = model.posterior_.to_dict()
+    base = posterior.to_dict()
     physics = []
     for k in range(n_folds):
         try:
@@ -161,14 +169,13 @@ def physics_from_arrays(model, arrays: dict[str, np.ndarray], n_folds: int) -> l
     return physics
 
 
-def warn_calibration(model, codes: np.ndarray, cal_idx: np.ndarray, level: float = 0.9
+def warn_calibration(cp, codes: np.ndarray, cal_idx: np.ndarray, level: float = 0.9
                      ) -> None:
     """Warn (:class:`CalibrationWarning`) when ``level`` cannot be calibrated well.
 
     Too few calibration trips (``ceil((n + 1) level) > n``), or fewer than
     :data:`MIN_GROUPS` calibration groups when groups were given.
     """
-    cp = getattr(model, "conformal_", None)
     if cp is None:
         return
     n = cp.n_calibration
@@ -196,12 +203,11 @@ def nets_to_arrays(nets) -> dict[str, np.ndarray]:
             for name, a in net.to_arrays().items()}
 
 
-def nets_from_arrays(model, arrays: dict[str, np.ndarray], n_folds: int) -> list:
-    """Rebuild ``n_folds`` fold ensembles of ``model``'s architecture (ValueError on a bad array)."""
+def nets_from_arrays(learner, arrays: dict[str, np.ndarray], n_folds: int) -> list:
+    """Rebuild ``n_folds`` fold ensembles of ``learner``'s architecture (ValueError on a bad array)."""
     nets = []
     for k in range(n_folds):
-        net = EnsembleMLP(len(model.feature_names_), model.hidden, n_members=model.n_members,
-                          dropout=model.dropout, heteroscedastic=model.heteroscedastic)
+        net = learner.new_net()
         net.load_arrays({n[len(f"cv{k}."):]: a for n, a in arrays.items()
                          if n.startswith(f"cv{k}.")}, what=f"CV+ fold network {k}")
         net.eval()

@@ -238,6 +238,53 @@ class TrainingDomain:
         s = np.where(self.missing_inputs(table, traces), np.maximum(s, MISSING_INPUT_SCORE), s)
         return s, s <= 1.0
 
+    def assess(self, table: pd.DataFrame, traces=None, *, columns=None, fade: bool = False,
+               warn: bool = False, stacklevel: int = 4):
+        """:class:`~hybridev.learning.steps.DomainAssessment` of the trips of ``table``.
+
+        ``columns``: the table's columns as arrays (:meth:`_score_columns`; only without
+        ``traces``). ``fade``: add the discrepancy's weight per trip (``fade``, and
+        ``mode_fade`` for the trips lacking a trained-with mode; None where it is 1 for
+        every trip, :meth:`discrepancy_fade`). ``warn``: warn once when some trips are
+        out (:func:`warn_out_of_domain`, with the reasons).
+        """
+        from hybridev.learning.steps import DomainAssessment
+
+        n = len(table)
+        if columns is not None and traces is None:
+            grade = columns["grade_pct"] if "grade_pct" in columns else np.zeros(n)
+            q = _quantities(columns["temperature_c"], columns["avg_speed_kmh"],
+                            columns["distance_km"], grade)
+            has_trace = np.zeros(n, dtype=bool)
+            mode = columns.get("mode")
+        else:
+            q, has_trace = domain_quantities(table, traces)
+            mode = table["mode"].to_numpy(dtype=object) if "mode" in table.columns else None
+        g = self._gaps(q) if n else np.zeros((0, len(DOMAIN_QUANTITIES)))
+        gap = g.max(axis=1) if n else np.zeros(0)
+        no_mode = ((pd.isna(mode) if mode is not None else np.ones(n, dtype=bool))
+                   if self.needs_mode else np.zeros(n, dtype=bool))
+        no_trace = ~has_trace if self.needs_trace else np.zeros(n, dtype=bool)
+        score = np.where(no_mode | no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
+        ok = score <= 1.0
+        reasons = {}
+        if not ok.all():
+            for j, name in enumerate(_REASON_NAMES):
+                if (g[:, j] > 1.0).any():
+                    reasons[name] = int((g[:, j] > 1.0).sum())
+            for name, lacking in (("mode", no_mode), ("logged trace", no_trace)):
+                if lacking.any():
+                    reasons[f"missing {name}"] = int(lacking.sum())
+            if warn:
+                warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
+        out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
+                               no_mode=no_mode, reasons=reasons)
+        if fade and n:
+            out.fade = None if np.all(gap <= 1.0) else self.discrepancy_fade(gap)
+            sub = gap[no_mode]
+            out.mode_fade = None if np.all(sub <= 1.0) else self.discrepancy_fade(sub)
+        return out
+
     def _score_columns(self, columns, n_trips: int) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`score` without logged traces, of a table given as arrays by column name.
 

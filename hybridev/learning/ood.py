@@ -35,105 +35,122 @@ the final model's own conformally calibrated interval ``mu +- q sd``. With
 CV+ the CV+ interval is not used for them: its guarantee rests on the new trip
 being exchangeable with the training trips, which an out-of-domain trip is
 not, and there its width measures only how far the fold models' predictions
-spread. :meth:`predict_distribution` scales each trip's spread by
+spread. ``predict_distribution`` scales each trip's spread by
 ``sd_ood / sd``.
+
+:class:`OutOfDomainSpread` is the step of the predictive path
+(:mod:`hybridev.learning.pipeline`) that does this: it reads the training domain's
+:class:`~hybridev.learning.steps.DomainAssessment`, the raw prediction and the
+calibrated interval, and widens the intervals of the trips out of the domain.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy.special import ndtri
 
-from hybridev.learning.domain import (
-    MISSING_INPUT_SCORE,
-    TrainingDomain,
-    domain_quantities,
-    warn_out_of_domain,
-)
-from hybridev.learning.features import MODE_NAMES
-from hybridev.learning.predictive import EnergyDistribution
+from hybridev.learning.domain import MISSING_INPUT_SCORE, TrainingDomain
+from hybridev.learning.steps import CalibratedInterval, DomainAssessment, RawPrediction
 
-__all__ = ["OutOfDomainMixin", "trace_gap"]
+__all__ = ["OutOfDomainSpread", "trace_gap"]
 
 _PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
                     "kwh_per_km_physics")
 
 
-class OutOfDomainMixin:
-    """Domain scores and out-of-domain spreads for :class:`hybridev.HybridModel`."""
+@dataclass(frozen=True)
+class OutOfDomainSpread:
+    """The out-of-domain spread of a fitted model (see the module docstring).
 
-    def _ood_spread(self, table: pd.DataFrame, dist: EnergyDistribution, traces
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(domain_score, in_domain, sd_ood)`` per trip; warns once when some are out.
+    Parameters
+    ----------
+    noise_rel : float
+        The physics posterior's median relative noise (0 without a posterior).
+    trace_gap_rel : float
+        ``fit_info_["trace_gap_rel"]`` (0 when not fitted on logged traces).
+    """
 
-        ``sd_ood`` (kWh) of a trip outside the training ranges or in a gap of
-        them is the spread of the physics posterior draws, plus the posterior's
-        relative noise, the residual's departure from the physics and the rest
-        of the model's own spread, these three times the inflation
-        :meth:`~hybridev.learning.domain.TrainingDomain.inflation` of its
-        largest gap. A trip only lacking the ``mode`` the model was trained
-        with is marginalised over the three modes instead: its spread adds
-        the spread between the three modes' predictions (no inflation). A trip
-        lacking a trained-with logged trace counts as a gap of 2.
+    noise_rel: float = 0.0
+    trace_gap_rel: float = 0.0
+
+    def sd(self, assessment: DomainAssessment | None, table: pd.DataFrame, mu: np.ndarray,
+           sd: np.ndarray, var_draws: np.ndarray, *, dist=None, mode_means=None
+           ) -> np.ndarray:
+        """``sd_ood`` (kWh) per trip: the model's own ``sd`` in the domain.
+
+        ``var_draws`` (n_trips,): the variance of the physics draws; ``dist``: the raw
+        distribution behind ``mu`` and ``sd`` (its
+        :meth:`~hybridev.learning.predictive.EnergyDistribution.excess_var` gives the
+        variance beyond the draws'; without it ``max(sd^2 - var_draws, 0)``, which loses
+        digits when the draws dominate). ``mode_means``: for the trips lacking a
+        trained-with mode, their point energies under the three modes (3, n_no_mode),
+        or a callable giving them from those trips' table.
         """
-        score, ok, sd_ood = self._ood_sd(table, dist.mean(), dist.std(),
-                                         dist.physics_draws_kwh.var(axis=0), traces, dist=dist)
-        n_out = int((~ok).sum())
-        if n_out:
-            warn_out_of_domain(n_out, dist.n_trips, stacklevel=4,
-                               reasons=self.domain_.reasons(table, traces))
-        return score, ok, sd_ood
-
-    def _ood_sd(self, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray,
-                var_draws: np.ndarray, traces=None, *, dist: EnergyDistribution | None = None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`_ood_spread` from the pieces: means, spreads and physics-draw variances.
-
-        ``dist``: the distribution behind them; its
-        :meth:`~EnergyDistribution.excess_var` gives the variance beyond the
-        draws' (only when some trip is out of the domain). Without it,
-        ``max(sd^2 - var_draws, 0)``, which loses digits when the draws dominate.
-        """
-        dom = getattr(self, "domain_", None)
-        n = len(table)
-        if dom is None:
-            return np.zeros(n), np.ones(n, dtype=bool), sd
-        score, ok = dom.score(table, traces)
-        if ok.all():
-            return score, ok, sd
-        gap = dom.gaps(table, traces).max(axis=1)
-        no_trace = dom.needs_trace & ~domain_quantities(table, traces)[1]
-        gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
-        post = getattr(self, "posterior_", None)
-        noise = float(np.median(post.noise_rel)) if post is not None else 0.0
+        if assessment is None or assessment.in_domain.all():
+            return sd
+        a = assessment
+        gap = np.where(a.no_trace, np.maximum(a.gap, MISSING_INPUT_SCORE), a.gap)
         e_p = table["energy_kwh_physics"].to_numpy(float)
         # the posterior draws' spread as it is; the rest (noise, network) inflated
         var_rest = (dist.excess_var() if dist is not None
                     else np.maximum(sd**2 - var_draws, 0.0))
-        rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
+        rest = (self.noise_rel * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
         infl = TrainingDomain.inflation(gap)
         sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
-        gap_rel = float((getattr(self, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
-        if gap_rel > 0 and no_trace.any():  # what the missing trace alone can change
-            sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2 + (gap_rel * mu[no_trace]) ** 2)
-        no_mode = (table["mode"].isna().to_numpy() if dom.needs_mode and "mode" in table
-                   else np.zeros(n, dtype=bool))
+        no_trace = a.no_trace
+        if self.trace_gap_rel > 0 and no_trace.any():  # what the missing trace alone can change
+            sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2
+                                       + (self.trace_gap_rel * mu[no_trace]) ** 2)
+        no_mode = a.no_mode
         if no_mode.any():
-            sub = table.loc[no_mode, [c for c in table.columns if c not in _PHYSICS_COLUMNS]]
-            mus = np.stack([self._mode_prediction(sub.assign(mode=m), traces)
-                            for m in MODE_NAMES])
+            mus = mode_means
+            if callable(mus):
+                mus = mus(table.loc[no_mode, [c for c in table.columns
+                                              if c not in _PHYSICS_COLUMNS]])
             between = mus.var(axis=0) + (mu[no_mode] - mus.mean(axis=0)) ** 2
             sd_ood[no_mode] = np.sqrt(sd_ood[no_mode] ** 2 + between)
-        return score, ok, sd_ood
+        return sd_ood
 
-    def _mode_prediction(self, trips: pd.DataFrame, traces) -> np.ndarray:
-        """Point energy (kWh) of ``trips`` with their given modes, shape (n_trips,)."""
-        tab = self._physics(trips, traces)
-        e = tab["energy_kwh_physics"].to_numpy(float)
-        sc = self._target_scale(e, tab["distance_km"].to_numpy(float))
-        return self._combine(e, self._residual_moments(self._features(tab), sc)[0].mean(0))
+    def widen(self, assessment: DomainAssessment | None, raw: RawPrediction,
+              cal: CalibratedInterval, level: float) -> tuple[CalibratedInterval, np.ndarray]:
+        """Intervals of out-of-domain trips widened to ``mu +- z sd_ood``; and ``confidence``.
+
+        Returns the interval (never narrower than ``cal``'s) and the predictive
+        standard deviation per trip (kWh, ``sd_ood`` out of the domain).
+        """
+        dist, mu, sd = raw.dist, cal.mean, cal.std
+        ok = (np.ones(dist.n_trips, dtype=bool) if assessment is None
+              else assessment.in_domain)
+        sd_ood = self.sd(assessment, raw.table, mu, sd, dist.physics_draws_kwh.var(axis=0),
+                         dist=dist, mode_means=raw.mode_means)
+        z2, z1 = float(ndtri(0.5 + level / 2.0)), float(ndtri(level))
+        lo = np.where(ok, cal.lo, np.minimum(cal.lo, mu - z2 * sd_ood))
+        hi = np.where(ok, cal.hi, np.maximum(cal.hi, mu + z2 * sd_ood))
+        lo_one = np.where(ok, cal.lo_one, np.minimum(cal.lo_one, mu - z1 * sd_ood))
+        wide = CalibratedInterval(mean=mu, std=sd, lo=lo, hi=hi, lo_one=lo_one,
+                                  spread_factor=cal.spread_factor, quantile=cal.quantile)
+        return wide, np.where(ok, sd, np.maximum(sd, sd_ood))
+
+    def spread_factor(self, assessment: DomainAssessment | None, raw: RawPrediction,
+                      factor: float):
+        """Per-trip spread factor of :meth:`HybridModel.predict_distribution`.
+
+        ``factor`` in the domain, at least ``sd_ood / sd`` out of it; a number when
+        every trip has ``factor``.
+        """
+        dist = raw.dist
+        mu, sd_raw = dist.mean(), dist.std()
+        ok = (np.ones(dist.n_trips, dtype=bool) if assessment is None
+              else assessment.in_domain)
+        sd_ood = self.sd(assessment, raw.table, mu, sd_raw, dist.physics_draws_kwh.var(axis=0),
+                         dist=dist, mode_means=raw.mode_means)
+        sd = np.maximum(sd_raw, 1e-12)
+        per_trip = np.where(ok, factor, np.maximum(factor, sd_ood / sd))
+        return factor if np.all(per_trip == factor) else per_trip
 
 
 def trace_gap(model, good: pd.DataFrame, e_meas: np.ndarray, traces) -> float:

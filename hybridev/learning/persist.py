@@ -1,21 +1,25 @@
 """Model directories on disk: one JSON document plus one ``.npz`` of arrays, no pickle.
 
 :func:`save_model` / :func:`load_model` implement ``HybridModel.save`` and
-``HybridModel.load``. Layout of a model directory (format version 2)::
+``HybridModel.load``. Layout of a model directory (format version 3)::
 
     model.json              format name and version, hybridev version, configuration,
-                            vehicle, feature names, training summary, and the name and
-                            SHA-256 of the array file
-    arrays.npz              numpy arrays (network weights, scalers, loss curves);
-                            absent when nothing was fitted
+                            vehicle, training summary, each component's document under
+                            ``components``, and the name and SHA-256 of the array file
+    arrays.npz              numpy arrays, ``<component>.<name>``: ``learner.*`` (network
+                            weights, scalers, loss curves), ``physics.*`` (posterior
+                            draws, discrepancy), ``domain.*``, ``calibrator.*`` (scores,
+                            Mondrian bins, CV+ fold networks and physics); absent when
+                            nothing was fitted
     _hybridev-manifest.json  the marker of a folder written by hybridev
                             (:mod:`hybridev.core.outputs`): ``kind: "model_dir"``,
                             format name and version, and the SHA-256 of every file
 
-Extensions of the model (a physics posterior, a conformal calibration) keep
-their state through ``model._extra_state() -> (json_dict, arrays)`` and
-``model._set_extra_state(json_dict, arrays)``, stored under ``"extra"`` and as
-``extra.*`` arrays.
+Each component of the model (:meth:`hybridev.HybridModel.components`) saves and loads
+its own state: ``to_arrays() -> (json_doc, arrays)`` and ``set_arrays(json_doc,
+arrays)``. Subclasses may keep more state through ``model._extra_state() ->
+(json_dict, arrays)`` and ``model._set_extra_state(json_dict, arrays)``, stored under
+``"extra"`` and as ``extra.*`` arrays.
 
 Writing goes through :func:`hybridev.core.outputs.output_dir`: atomic (a failed
 or interrupted save leaves any previous directory untouched and no temporary
@@ -30,16 +34,17 @@ by the configuration against the stored weights. Every failure is a
 ``ValueError`` naming the file and the problem: missing or unreadable files,
 invalid JSON, another format or format version, a model written by another
 major version of hybridev, a checksum mismatch (corruption, truncation), and
-wrong names or shapes. Models of format version 1 (no manifest; only the
-array file is checksummed) still load.
+wrong names or shapes. Models of format versions 1 (no manifest; only the
+array file is checksummed) and 2 (the network and its scalers at the top level, the
+rest under ``extra``) still load and predict the same (``tests/learning/fixtures``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +57,6 @@ from hybridev.core.outputs import (
     read_manifest,
     sha256_file,
 )
-from hybridev.learning.nn import EnsembleMLP, n_parameters
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["ARRAYS_FILE", "DOC_FILE", "FORMAT_NAME", "FORMAT_VERSION", "MAX_ARRAYS",
@@ -62,10 +66,10 @@ DOC_FILE = "model.json"
 ARRAYS_FILE = "arrays.npz"
 FORMAT_NAME = "hybridev.learning.model"
 """Format name of a saved :class:`hybridev.HybridModel` (or subclass)."""
-FORMAT_VERSION = 2
-"""Version of that format (2: with a manifest of SHA-256 sums); version 1 is still read,
-other versions are refused."""
-READ_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+"""Version of that format (3: state by component; 2: with a manifest of SHA-256 sums);
+versions 1 and 2 are still read, other versions are refused."""
+READ_VERSIONS = (1, 2, 3)
 MAX_ARRAYS = 4096
 """At most this many arrays in ``arrays.npz``."""
 MAX_ARRAY_BYTES = 1 << 30
@@ -202,8 +206,9 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
                    ) -> tuple[dict, dict[str, np.ndarray] | None]:
     """Read a directory written by :func:`write_model_dir`, checking format and integrity.
 
-    ``format_version`` is the current version; version 1 (no manifest) is
-    read too when ``format_version`` is 2.
+    ``format_version`` is the current version; for the model format the older
+    :data:`READ_VERSIONS` are read too, for other formats of version 2 version 1
+    (version 1: without a manifest).
 
     Returns
     -------
@@ -225,7 +230,10 @@ def read_model_dir(path: str | os.PathLike, *, format_name: str, format_version:
     if doc.get("format") != format_name:
         raise ValueError(f"{str(doc_path)!r} has format={doc.get('format')!r}; "
                          f"expected {format_name!r}")
-    readable = (1, format_version) if format_version == 2 else (format_version,)
+    if format_name == FORMAT_NAME and format_version == FORMAT_VERSION:
+        readable = READ_VERSIONS
+    else:
+        readable = (1, format_version) if format_version == 2 else (format_version,)
     version = doc.get("format_version")
     if isinstance(version, bool) or version not in readable:
         raise ValueError(f"{str(doc_path)!r} has format_version={version!r}; "
@@ -268,77 +276,70 @@ def _config(model) -> dict:
 def save_model(model, path: str | os.PathLike, *, option: str = "path") -> None:
     """Write a (fitted or unfitted) :class:`hybridev.HybridModel` to the directory ``path``.
 
-    ``path`` must be new, empty or a folder hybridev wrote (else ``ValueError``
-    naming ``option``); see :func:`write_model_dir`.
+    Each component writes its own state (``to_arrays() -> (json_doc, arrays)``), stored
+    under ``components`` and as ``<component>.*`` arrays; ``path`` must be new, empty or
+    a folder hybridev wrote (else ``ValueError`` naming ``option``); see
+    :func:`write_model_dir`.
     """
     model._check_params()
-    fitted = hasattr(model, "net_")
     doc = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
            "estimator": type(model).__name__, "config": _config(model),
-           "vehicle": dataclasses.asdict(model._vehicle()), "fitted": fitted}
-    arrays = None
-    if fitted:
-        h = model.history_
-        doc.update(feature_names=list(model.feature_names_),
-                   target_mean=model.target_mean_, target_std=model.target_std_,
-                   history={"best_epoch": np.asarray(h["best_epoch"]).tolist(),
-                            "stopped_epoch": np.asarray(h["stopped_epoch"]).tolist(),
-                            "n_epochs": int(h["n_epochs"])},
-                   fit_info=model.fit_info_)
-        arrays = {f"net.{k}": v for k, v in model.net_.to_arrays().items()}
-        arrays.update(feature_mean=model.feature_mean_, feature_std=model.feature_std_,
-                      train_loss=h["train_loss"], val_loss=h["val_loss"])
+           "vehicle": dataclasses.asdict(model._vehicle()), "fitted": model.fitted(),
+           "components": {}}
+    arrays = {}
+    if model.fitted():
+        doc["fit_info"] = model.fit_info_
+        for name, comp in model.components().items():
+            state = comp.to_arrays()  # (doc, arrays), or arrays only (TrainingDomain)
+            cdoc, carrays = state if isinstance(state, tuple) else ({}, state)
+            doc["components"][name] = cdoc
+            arrays.update({f"{name}.{k}": v for k, v in carrays.items()})
     extra_doc, extra_arrays = model._extra_state()
     doc["extra"] = extra_doc
-    if extra_arrays:
-        arrays = {**(arrays or {}), **{f"extra.{k}": v for k, v in extra_arrays.items()}}
-    write_model_dir(path, doc, arrays, option=option)
+    arrays.update({f"extra.{k}": v for k, v in extra_arrays.items()})
+    write_model_dir(path, doc, arrays or None, option=option)
 
 
-def _restore(model, doc: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Set the learned attributes of ``model`` from a saved document and arrays."""
-    names = tuple(doc["feature_names"])
-    if names != model._feature_names():
-        raise ValueError(f"feature_names={list(names)!r} do not match the model's features "
-                         f"{list(model._feature_names())!r}")
-    stored = sum(int(v.size) for k, v in arrays.items() if k.startswith("net."))
-    need = int(model.n_members) * n_parameters(len(names), model.hidden,
-                                               heteroscedastic=bool(model.heteroscedastic))
-    if need != stored:  # checked before the network is allocated
-        raise ValueError(f"the configuration (n_members={model.n_members}, hidden="
-                         f"{list(model.hidden)}) needs {need} network weights, but "
-                         f"{ARRAYS_FILE} stores {stored}")
-    net = EnsembleMLP(len(names), model.hidden, n_members=model.n_members,
-                      dropout=model.dropout, heteroscedastic=model.heteroscedastic)
-    net.load_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("net.")},
-                    what="network")
-    net.eval()
-    for key in ("feature_mean", "feature_std"):
-        a = arrays.get(key)
-        if a is None or a.shape != (len(names),) or not np.all(np.isfinite(a)):
-            raise ValueError(f"array {key!r} must be {len(names)} finite values")
-    if np.any(arrays["feature_std"] <= 0):
-        raise ValueError("array 'feature_std' must be positive")
-    target_mean, target_std = float(doc["target_mean"]), float(doc["target_std"])
-    if not (math.isfinite(target_mean) and math.isfinite(target_std) and target_std > 0):
-        raise ValueError(f"target_mean={target_mean!r}, target_std={target_std!r} must be "
-                         "finite, target_std > 0")
-    h = doc["history"]
-    model.history_ = {"train_loss": arrays["train_loss"], "val_loss": arrays["val_loss"],
-                      "best_epoch": np.asarray(h["best_epoch"]),
-                      "stopped_epoch": np.asarray(h["stopped_epoch"]),
-                      "n_epochs": int(h["n_epochs"])}
-    model.feature_names_, model.n_features_in_ = names, len(names)
-    model.feature_mean_ = arrays["feature_mean"].astype(float)
-    model.feature_std_ = arrays["feature_std"].astype(float)
-    model.target_mean_, model.target_std_ = target_mean, target_std
-    model.fit_info_ = dict(doc["fit_info"])
-    model.n_parameters_ = net.n_parameters_per_member
-    model.net_ = net
+COMPONENTS = ("physics", "learner", "domain", "calibrator")
+"""Components of a saved model, in the order they are restored."""
+
+
+def _legacy_components(doc: dict, arrays: dict[str, np.ndarray]) -> tuple[dict, dict]:
+    """A format-1 or -2 document and arrays in the layout of format 3.
+
+    Those formats kept the network and its scalers at the top level and the rest as
+    ``extra``: the posterior (``posterior``, ``posterior_*``, ``discrepancy.*``), the
+    calibration (``mondrian_cut_km``, ``cv_folds``, ``conformal_*``, ``cv{k}.*``) and the
+    domain (``domain.*``); other ``extra`` entries (a subclass's) stay there.
+    """
+    docs = {c: {} for c in COMPONENTS}
+    docs["learner"] = {k: doc[k] for k in ("feature_names", "target_mean", "target_std",
+                                           "history") if k in doc}
+    extra = dict(doc.get("extra", {}))
+    if "posterior" in extra:
+        docs["physics"]["posterior"] = extra.pop("posterior")
+    for key in ("mondrian_cut_km", "cv_folds"):
+        if key in extra:
+            docs["calibrator"][key] = extra.pop(key)
+    out = {}
+    for k, v in arrays.items():
+        if not k.startswith("extra."):
+            out[f"learner.{k}"] = v
+            continue
+        name = k[len("extra."):]
+        if name.startswith(("posterior_", "discrepancy.")):
+            out[f"physics.{name}"] = v
+        elif name.startswith("conformal_") or re.match(r"cv[0-9]+\.", name):
+            out[f"calibrator.{name}"] = v
+        elif name.startswith("domain."):
+            out[name] = v
+        else:
+            out[k] = v
+    return {**doc, "components": docs, "extra": extra}, out
 
 
 def load_model(cls, path: str | os.PathLike):
-    """Read a model of class ``cls`` written by :func:`save_model`.
+    """Read a model of class ``cls`` written by :func:`save_model` (format 1, 2 or 3).
 
     Raises
     ------
@@ -349,15 +350,21 @@ def load_model(cls, path: str | os.PathLike):
     where = f"{os.fspath(path)!r}"
     if doc.get("estimator") != cls.__name__:
         raise ValueError(f"{where} holds a {doc.get('estimator')!r}, not a {cls.__name__}")
+    arrays = arrays or {}
+    if "components" not in doc:  # formats 1 and 2
+        doc, arrays = _legacy_components(doc, arrays)
     try:
         model = cls(vehicle=VehicleParams(**doc["vehicle"]), **doc["config"])
         model._check_params()
         if doc["fitted"]:
-            if arrays is None:
+            if not arrays:
                 raise ValueError("the model is marked fitted but has no arrays")
-            _restore(model, doc, arrays)
+            comps = doc["components"]
+            parts = {c: (comps.get(c, {}), {k[len(c) + 1:]: v for k, v in arrays.items()
+                                            if k.startswith(c + ".")}) for c in COMPONENTS}
+            model._restore(parts, dict(doc["fit_info"]))
         model._set_extra_state(doc.get("extra", {}), {
-            k[len("extra."):]: v for k, v in (arrays or {}).items() if k.startswith("extra.")})
+            k[len("extra."):]: v for k, v in arrays.items() if k.startswith("extra.")})
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError,
             RuntimeError) as exc:
         msg = f"missing entry {exc}" if isinstance(exc, KeyError) else str(exc)

@@ -1,6 +1,9 @@
-"""Keeping predictions physical at any distance: an energy floor and the training-distance hold.
+"""The output step of the hybrid model: physical energy floor and final SoC.
 
-Two small guards on the learned residual, applied in the predict paths of
+The last step of the predictive path (:mod:`hybridev.learning.pipeline`):
+:func:`point_columns` and :func:`interval_columns` floor the predicted energies and
+interval bounds and add the final SoC (:func:`soc_from_energy`). Two small guards keep
+the learned residual physical at any distance, in the predict paths of
 :class:`hybridev.HybridModel` (point, interval) and of
 :func:`hybridev.predict_range` / :func:`hybridev.apps.range_plot.soc_fan`:
 
@@ -18,7 +21,8 @@ Two small guards on the learned residual, applied in the predict paths of
   interval bounds are never below the floor, and since the floor grows
   linearly with distance, so does every predicted energy eventually: the
   range is finite.
-* **Training-distance hold** (:func:`held_feature_table`). The networks take
+* **Training-distance hold** (:func:`held_feature_table`, applied by the residual
+  learner, :func:`hybridev.learning.residual.hold_inputs`). The networks take
   distance (and the physics energy, which scales with it) as inputs; outside
   the distances of the training trips they would extrapolate. The features
   of a trip longer (shorter) than the longest (shortest) training trip are
@@ -42,10 +46,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from hybridev.learning.residual import hold_distances, hold_inputs
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["FLOOR_MARGIN", "MAX_DROP_M", "distance_hold", "energy_floor_kwh",
-           "floor_per_km", "held_feature_table"]
+           "floor_per_km", "held_feature_table", "interval_columns", "point_columns",
+           "soc_from_energy"]
 
 FLOOR_MARGIN = 0.8
 """Share of the ideal traction energy used as the floor (room for 20 % road-load error)."""
@@ -123,55 +129,85 @@ def floor_along(distance_km: np.ndarray, flat_n: np.ndarray, grade_n: np.ndarray
 
 
 def distance_hold(model, distance_km) -> np.ndarray:
-    """Distances the networks see: clipped to the training trips' distance range.
+    """Distances ``model``'s networks see: clipped to the training trips' distance range.
 
     Without a recorded range (unfitted, or saved before it was recorded), the
     distances are returned unchanged.
     """
-    d = np.asarray(distance_km, float)
-    rng = getattr(model, "fit_info_", {}).get("distance_km_range")
-    if not rng:
-        return d
-    return np.clip(d, float(rng[0]), float(rng[1]))
+    return hold_distances(distance_km, getattr(model, "fit_info_", {}).get("distance_km_range"))
 
 
 def held_feature_table(model, table: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
-    """Physics table as the networks see it, and the factor on the residual scale.
+    """Physics table as ``model``'s networks see it, and the factor on the residual scale
+    (:func:`hybridev.learning.residual.hold_inputs`)."""
+    relative = model.residual_target == "relative" and model._residual
+    return hold_inputs(table, getattr(model, "fit_info_", {}).get("distance_km_range"),
+                       relative)
 
-    Trips outside the training distances get the distance of the boundary and
-    their physics energy scaled by ``d_held / d`` (same consumption); the
-    returned factor ``d / d_held`` multiplies an absolute residual (the
-    residual per km is held; for ``PureML`` the energy per km), and is 1 for
-    the relative target, whose scale already grows with the trip.
+
+def soc_from_energy(soc_initial, energy_kwh, capacity_kwh: float) -> np.ndarray:
+    """Final SoC ``s0 - E / C`` clipped to [0, 1].
+
+    The map is monotone non-increasing in energy, so quantiles of energy map
+    to quantiles of SoC (upper energy -> lower SoC), with a point mass at 0
+    when the battery empties (and at 1 when net regeneration, ``E < 0``,
+    would overfill it: the battery stops charging when full, as
+    :func:`hybridev.simulate`'s ``soc_final_physics``).
+
+    Examples
+    --------
+    >>> soc_from_energy(0.5, [10.0, 50.0, -50.0], 75.0).round(3).tolist()
+    [0.367, 0.0, 1.0]
     """
-    d = table["distance_km"].to_numpy(float)
-    held, ratio = _held_ratio(model, d)
-    if ratio is None:
-        return table, np.ones_like(d)
-    out = table.copy()
-    out["distance_km"] = held
-    if "energy_kwh_physics" in out.columns:
-        out["energy_kwh_physics"] = out["energy_kwh_physics"].to_numpy(float) * ratio
-    relative = model.residual_target == "relative" and model._residual
-    return out, (np.ones_like(d) if relative else 1.0 / ratio)
+    return np.clip(np.asarray(soc_initial, float) - np.asarray(energy_kwh, float)
+                   / capacity_kwh, 0.0, 1.0)
 
 
-def _held_ratio(model, d: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """Held distances and ``d_held / d`` (None when no trip is held)."""
-    held = distance_hold(model, d)
-    ratio = np.divide(held, d, out=np.ones_like(d), where=d > 0)
-    return held, (None if np.all(ratio == 1.0) else ratio)
+def point_columns(columns: dict, energy_kwh: np.ndarray, vehicle: VehicleParams, *,
+                  floor: bool = True) -> dict[str, np.ndarray]:
+    """``energy_kwh_pred`` (floored at the physical floor) and ``soc_final_pred``.
+
+    ``columns``: the trips' columns as arrays (``distance_km``, ``avg_speed_kmh``,
+    ``soc_initial``, optional ``grade_pct``); ``floor=False`` for the physics fallback.
+    """
+    if floor:
+        energy_kwh = np.maximum(energy_kwh, _floor_of_columns(columns, vehicle))
+    return {"energy_kwh_pred": energy_kwh,
+            "soc_final_pred": soc_from_energy(columns["soc_initial"], energy_kwh,
+                                              vehicle.battery_capacity_kwh)}
 
 
-def _held_columns(model, columns: dict[str, np.ndarray]
-                  ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """:func:`held_feature_table` of a table given as arrays by column name (float)."""
-    d = columns["distance_km"]
-    held, ratio = _held_ratio(model, d)
-    if ratio is None:
-        return columns, np.ones_like(d)
-    out = {**columns, "distance_km": held}
-    if "energy_kwh_physics" in out:
-        out["energy_kwh_physics"] = out["energy_kwh_physics"] * ratio
-    relative = model.residual_target == "relative" and model._residual
-    return out, (np.ones_like(d) if relative else 1.0 / ratio)
+def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
+                     in_domain: np.ndarray, domain_score: np.ndarray,
+                     vehicle: VehicleParams, *, residual: bool = True) -> pd.DataFrame:
+    """``table`` with the point, interval, SoC, domain and confidence columns (in place).
+
+    ``interval``: a :class:`~hybridev.learning.steps.CalibratedInterval` (after the
+    out-of-domain step). Energies and bounds are floored at ``min(E_p, 0)`` (``PureML``:
+    0) and the physical floor; the one-sided bound is capped at the point prediction
+    (so every SoC interval holds it). A trip whose upper energy may empty the battery
+    (``hi >= s0 C``) gets the one-sided SoC interval ``[0, s0 - lo_one / C]``.
+    ``confidence_rel`` is ``confidence`` over ``max(|E|, 0.05 kWh/km d)``.
+    """
+    e_p = table["energy_kwh_physics"].to_numpy(float)
+    fl = np.minimum(e_p, 0.0) if residual else np.zeros_like(e_p)
+    fl = np.maximum(fl, energy_floor_kwh(table, vehicle))
+    point = np.maximum(interval.mean, fl)
+    lo, hi, lo_one = (np.maximum(a, fl) for a in (interval.lo, interval.hi, interval.lo_one))
+    lo_one = np.minimum(lo_one, point)  # the SoC interval always holds the point prediction
+    cap = vehicle.battery_capacity_kwh
+    s0 = table["soc_initial"].to_numpy(float)
+    may_empty = hi >= s0 * cap
+    out = table
+    out["energy_kwh_pred"] = point
+    out["energy_kwh_lo"] = lo
+    out["energy_kwh_hi"] = hi
+    out["soc_final_pred"] = soc_from_energy(s0, point, cap)
+    out["soc_final_lo"] = np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap))
+    out["soc_final_hi"] = soc_from_energy(s0, np.where(may_empty, lo_one, lo), cap)
+    out["in_domain"] = in_domain
+    out["domain_score"] = domain_score
+    out["confidence"] = confidence
+    scale = np.maximum(np.abs(point), 0.05 * table["distance_km"].to_numpy(float))
+    out["confidence_rel"] = confidence / scale
+    return out

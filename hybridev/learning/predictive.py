@@ -31,30 +31,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hybridev.learning.physical import soc_from_energy
 from hybridev.metrics.mixture import mixture_quantile
 
-__all__ = ["EnergyDistribution", "soc_from_energy"]
+__all__ = ["EnergyDistribution", "build_distribution", "soc_from_energy"]
 
 _MIN_STD_KWH = 1e-9
 """Width given to zero-variance mixture components when computing quantiles, kWh."""
-
-
-def soc_from_energy(soc_initial, energy_kwh, capacity_kwh: float) -> np.ndarray:
-    """Final SoC ``s0 - E / C`` clipped to [0, 1].
-
-    The map is monotone non-increasing in energy, so quantiles of energy map
-    to quantiles of SoC (upper energy -> lower SoC), with a point mass at 0
-    when the battery empties (and at 1 when net regeneration, ``E < 0``,
-    would overfill it: the battery stops charging when full, as
-    :func:`hybridev.simulate`'s ``soc_final_physics``).
-
-    Examples
-    --------
-    >>> soc_from_energy(0.5, [10.0, 50.0, -50.0], 75.0).round(3).tolist()
-    [0.367, 0.0, 1.0]
-    """
-    return np.clip(np.asarray(soc_initial, float) - np.asarray(energy_kwh, float)
-                   / capacity_kwh, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -195,3 +178,28 @@ class EnergyDistribution:
         raw = (self.physics_draws_kwh[d] + self.residual_mean_kwh[m]
                + self.residual_std_kwh[m] * rng.standard_normal((n_samples, self.n_trips)))
         return centre + self.spread_factor * (raw - centre)
+
+
+def build_distribution(physics_draws_kwh: np.ndarray, energy_physics_kwh: np.ndarray,
+                       residual_mean_kwh: np.ndarray, residual_var_kwh2: np.ndarray | None,
+                       *, residual: bool = True) -> EnergyDistribution:
+    """The raw (spread factor 1) predictive distribution from its parts.
+
+    Parameters
+    ----------
+    physics_draws_kwh : numpy.ndarray, shape (n_draws, n_trips), kWh
+        Physics energies of the posterior draws; centred on their mean and moved to
+        ``energy_physics_kwh`` (the posterior median the networks were trained
+        against). ``residual=False`` (``PureML``): no physics part (zeros).
+    energy_physics_kwh : numpy.ndarray, shape (n_trips,), kWh
+    residual_mean_kwh, residual_var_kwh2 : numpy.ndarray, shape (n_members, n_trips)
+        The members' residual means (kWh) and noise variances (kWh^2; None: no noise).
+    """
+    mean = residual_mean_kwh
+    std = np.zeros_like(mean) if residual_var_kwh2 is None else np.sqrt(residual_var_kwh2)
+    if not residual:
+        centred = np.zeros_like(physics_draws_kwh)
+    else:
+        centred = physics_draws_kwh - physics_draws_kwh.mean(axis=0)
+        centred += energy_physics_kwh
+    return EnergyDistribution(centred, mean, std)

@@ -107,31 +107,29 @@ def test_missing_mode_is_marginalised_and_widened(warm):
 
 def test_residual_does_not_extrapolate_beyond_training_distances(warm):
     m, _ = warm
-    x = m._features(m._physics(_table([20, 20], dist=1e3, speed=60.0).assign(soc_initial=1.0)))
+    table = m.physics_stage().table(_table([20, 20], dist=1e3, speed=60.0).assign(soc_initial=1.0))
+    x = m.learner_.features(table, m.domain_)
     assert np.all(x <= m.domain_.feature_hi + 1e-6) and np.all(x >= m.domain_.feature_lo - 1e-6)
 
 
 def test_ood_spread_inflates_all_but_the_posterior_draws():
-    from types import SimpleNamespace
+    from hybridev.learning.ood import OutOfDomainSpread
 
-    from hybridev.learning.ood import OutOfDomainMixin
-
-    stub = OutOfDomainMixin()
-    stub.domain_ = TrainingDomain.fit(_table([20.0, 22.0, 25.0]), np.zeros((3, 1)))
-    stub.posterior_ = SimpleNamespace(noise_rel=np.array([0.0]))
+    dom = TrainingDomain.fit(_table([20.0, 22.0, 25.0]), np.zeros((3, 1)))
+    spread = OutOfDomainSpread(noise_rel=0.0)
     table = _table([-10.0, -10.0, 21.0]).assign(energy_kwh_physics=2.0)  # two far out, one in
     mu = np.full(3, 2.0)
     infl = float(TrainingDomain.inflation(np.array([1e3]))[0])  # capped: the cold trips
     assert infl == 3.0
     # all of the spread from the posterior draws (a parameter left at its prior): not inflated;
     # all from the rest (noise, network): inflated; in the domain: the model's own spread
-    _, ok, sd_ood = stub._ood_sd(table, mu, np.array([1.0, 0.1, 0.1]),
-                                 np.array([1.0, 0.0, 0.0]))
-    assert ok.tolist() == [False, False, True]
+    a = dom.assess(table)
+    sd_ood = spread.sd(a, table, mu, np.array([1.0, 0.1, 0.1]), np.array([1.0, 0.0, 0.0]))
+    assert a.in_domain.tolist() == [False, False, True]
     np.testing.assert_allclose(sd_ood, [1.0, 0.3, 0.1])
     # a residual departing from the physics is inflated with the rest
-    _, _, sd2 = stub._ood_sd(table, mu + np.array([0.0, 0.4, 0.0]), np.array([1.0, 0.3, 0.1]),
-                             np.array([1.0, 0.0, 0.0]))
+    sd2 = spread.sd(a, table, mu + np.array([0.0, 0.4, 0.0]), np.array([1.0, 0.3, 0.1]),
+                    np.array([1.0, 0.0, 0.0]))
     np.testing.assert_allclose(sd2, [1.0, 3.0 * 0.5, 0.1])
 
 
@@ -151,8 +149,10 @@ def test_discrepancy_fades_to_the_calibrated_physics_out_of_the_domain():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         out = m.predict(test)
-    valid = m._validated(test)
-    stats = m._stats(valid)
+    from hybridev.learning.inputs import validate_prediction_trips
+
+    valid = validate_prediction_trips(test)
+    stats = m.physics_.stats(valid)
     med = m.posterior_.as_params(np.median(m.posterior_.samples, axis=0)[None, :])
     plain = energy_from_stats(stats, med)[0]
     weighted = energy_from_stats(stats, med, term_weights=m.discrepancy_.weights)[0]

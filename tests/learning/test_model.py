@@ -111,8 +111,8 @@ def test_ensemble_members_differ_and_prediction_is_their_mean(small):
     m = HybridModel(n_steps=N_STEPS, n_members=3, heteroscedastic=True, calibrate_physics=False,
                     conformal_fraction=0.0, max_epochs=4).fit(small, seed=0)
     out = m.predict(small)
-    scale = m._target_scale(out.energy_kwh_physics, out.distance_km)
-    mean, var = m._residual_moments(m._features(out), scale)
+    scale = m.learner_.target_scale(out.energy_kwh_physics, out.distance_km)
+    mean, var = m.learner_.moments(m.learner_.features(out, m.domain_), scale)
     assert mean.shape == var.shape == (3, len(small))
     assert np.all(var > 0)
     assert not np.allclose(mean[0], mean[1]) and not np.allclose(mean[1], mean[2])
@@ -122,8 +122,10 @@ def test_ensemble_members_differ_and_prediction_is_their_mean(small):
 
 
 def test_residual_never_makes_energy_negative():
-    m = HybridModel()
-    e = m._combine(np.array([1.0, -2.0, -2.0, 3.0]), np.array([-3.0, -1.0, 1.5, 0.5]))
+    from hybridev.learning.components import new_learner
+
+    e = new_learner(HybridModel()).combine(np.array([1.0, -2.0, -2.0, 3.0]),
+                                           np.array([-3.0, -1.0, 1.5, 0.5]))
     np.testing.assert_allclose(e, [0.0, -2.0, -0.5, 3.5])
 
 
@@ -133,7 +135,8 @@ def test_unfitted_model_falls_back_to_physics_with_warning(small):
         out = m.predict(small)
     np.testing.assert_array_equal(out.energy_kwh_pred, out.energy_kwh_physics)
     with pytest.raises(NotFittedError, match="not fitted yet"):
-        m._residual_moments(np.zeros((2, 11), np.float32))
+        m.predict_interval(small)
+    assert not hasattr(m, "net_") and getattr(m, "posterior_", None) is None
 
 
 def test_unknown_mode_and_missing_hour(fitted, data):
@@ -145,7 +148,7 @@ def test_unknown_mode_and_missing_hour(fitted, data):
     np.testing.assert_array_equal(out.energy_kwh_physics, normal.energy_kwh_physics)
     noon = fitted.predict(trips.assign(mode=None, hour=12.0))
     np.testing.assert_array_equal(out.energy_kwh_pred, noon.energy_kwh_pred)
-    x = fitted._features(out) * fitted.feature_std_ + fitted.feature_mean_
+    x = fitted.learner_.features(out, fitted.domain_) * fitted.feature_std_ + fitted.feature_mean_
     np.testing.assert_allclose(x[:, 3:6], 1.0 / 3.0, rtol=1e-6)
     # Without a mode column at all, and with empty strings, the same.
     np.testing.assert_array_equal(
@@ -237,6 +240,13 @@ def _edit_doc(path, **changes):
     _resign(path)
 
 
+def _edit_component(path, name, **changes):
+    doc = json.loads((path / DOC_FILE).read_text())
+    doc["components"][name].update(changes)
+    (path / DOC_FILE).write_text(json.dumps(doc))
+    _resign(path)
+
+
 def _replace_array(path, key, value):
     with np.load(path / ARRAYS_FILE) as npz:
         arrays = dict(npz)
@@ -258,18 +268,18 @@ def _replace_array(path, key, value):
                                                                             '"max_epochs": 3')),
      "model.json' does not match its SHA-256"),
     (lambda p: (p / MANIFEST_FILE).unlink(), "_hybridev-manifest.json' is missing"),
-    (lambda p: _edit_doc(p, format_version=3), "format_version=3"),
+    (lambda p: _edit_doc(p, format_version=4), "format_version=4"),
     (lambda p: _edit_doc(p, format="sklearn.pickle"), "format='sklearn.pickle'"),
     (lambda p: _edit_doc(p, hybridev_version="1.0.0"), "another major version"),
     (lambda p: _edit_doc(p, estimator="PureML"), "holds a 'PureML'"),
-    (lambda p: _edit_doc(p, feature_names=["distance_km"]), "feature_names"),
+    (lambda p: _edit_component(p, "learner", feature_names=["distance_km"]), "feature_names"),
     (lambda p: _edit_doc(p, config={"n_members": 1, "colour": "red"}), "colour"),
-    (lambda p: _edit_doc(p, target_std=-1.0), "target_std"),
-    (lambda p: _replace_array(p, "net.w0", np.zeros((1, 10, 64), np.float32)),
+    (lambda p: _edit_component(p, "learner", target_std=-1.0), "target_std"),
+    (lambda p: _replace_array(p, "learner.net.w0", np.zeros((1, 10, 64), np.float32)),
      "needs [0-9]+ network weights, but arrays.npz stores"),
-    (lambda p: _replace_array(p, "net.w0", np.zeros((1, 64, 11), np.float32)),
+    (lambda p: _replace_array(p, "learner.net.w0", np.zeros((1, 64, 11), np.float32)),
      "'w0' has shape \\(1, 64, 11\\), expected \\(1, 11, 64\\)"),
-    (lambda p: _replace_array(p, "feature_std", np.zeros(11)), "feature_std"),
+    (lambda p: _replace_array(p, "learner.feature_std", np.zeros(11)), "feature_std"),
     (lambda p: shutil.rmtree(p), "does not exist"),
 ])
 def test_load_rejects_corrupted_or_incompatible_files(saved, tmp_path, corrupt, match):
@@ -308,14 +318,14 @@ def test_sklearn_params_and_clone(fitted):
 
 
 def test_prediction_in_row_blocks_matches_one_block(small, monkeypatch):
-    import hybridev.learning.model as model_module
+    import hybridev.learning.residual as residual_module
 
     m = HybridModel(n_steps=N_STEPS, n_members=2, heteroscedastic=True, calibrate_physics=False,
                     conformal_fraction=0.0, max_epochs=2).fit(small, seed=0)
-    x = m._features(m._physics(small))
-    mean, var = m._residual_moments(x)
-    monkeypatch.setattr(model_module, "_PREDICT_BLOCK_ROWS", 7)
-    mean7, var7 = m._residual_moments(x)
+    x = m.learner_.features(m.physics_stage().table(small), m.domain_)
+    mean, var = m.learner_.moments(x)
+    monkeypatch.setattr(residual_module, "PREDICT_BLOCK_ROWS", 7)
+    mean7, var7 = m.learner_.moments(x)
     # float32 kernels may round differently per block size: 1e-6 relative, 1e-6 kWh absolute
     np.testing.assert_allclose(mean7, mean, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(var7, var, rtol=1e-6, atol=1e-9)
@@ -345,7 +355,7 @@ def test_extension_state_is_saved_and_restored(small, tmp_path):
 @pytest.fixture(scope="module")
 def prob(small):
     """The default model on 80 trips, recording what the physics posterior was fitted on."""
-    import hybridev.learning.uncertainty as unc
+    import hybridev.learning.physics_stage as unc
 
     seen = []
     real = unc.calibrate_physics
@@ -372,7 +382,9 @@ def test_default_fit_holds_calibration_trips_out_of_everything(prob, small):
     assert len(seen) == 1 and len(seen[0]) == len(small) - n_cal  # posterior: non-calibration
     cal = small[~small["trip_id"].isin(seen[0])]
     # the conformal scores are those of exactly the held-out trips, with the fitted model
-    _, dist = m._distribution(cal.drop(columns=["energy_kwh"]), seed=0)
+    from hybridev.learning.pipeline import raw_distributions
+
+    dist = raw_distributions(m, cal.drop(columns=["energy_kwh"]), seed=0)[0][0]
     np.testing.assert_allclose(m.conformal_.residuals,
                                (cal["energy_kwh"].to_numpy() - dist.mean()) / dist.std(),
                                rtol=1e-9)
@@ -392,9 +404,10 @@ def test_default_physics_is_the_posterior_median(prob, small):
                               n_steps=N_STEPS).energy_kwh_true.to_numpy()
     # exact physics at the median, its terms re-weighted by the discrepancy stage; the
     # sufficient statistics split signs at the MAP (0.2 %)
+    from hybridev.learning.inputs import validate_prediction_trips
     from hybridev.physics.stats import term_energies
 
-    terms = term_energies(m.posterior_.stats_for(m._validated(trips)),
+    terms = term_energies(m.posterior_.stats_for(validate_prediction_trips(trips)),
                           m.posterior_.as_params(np.array([list(med.values())])))
     reweight = (terms @ m.discrepancy_.weights) / terms.sum(axis=1)
     np.testing.assert_allclose(out.energy_kwh_physics, exact * reweight, rtol=2e-3)
@@ -420,11 +433,14 @@ def test_new_options_are_validated(small, field, value):
 
 
 def test_relative_target_scale_follows_physics_with_a_floor():
-    m = HybridModel(residual_target="relative")
-    np.testing.assert_allclose(m._target_scale([10.0, 0.1, -2.0], [50.0, 50.0, 10.0]),
+    from hybridev.learning.components import new_learner
+
+    m = new_learner(HybridModel(residual_target="relative"))
+    np.testing.assert_allclose(m.target_scale([10.0, 0.1, -2.0], [50.0, 50.0, 10.0]),
                                [10.0, 2.5, 2.0])
     np.testing.assert_array_equal(
-        HybridModel(residual_target="absolute")._target_scale([10.0, 0.1], [50.0, 5.0]), 1.0)
+        new_learner(HybridModel(residual_target="absolute")).target_scale([10.0, 0.1],
+                                                                          [50.0, 5.0]), 1.0)
 
 
 def _logged(trips, n_logged):
@@ -540,7 +556,7 @@ def test_fit_warns_when_a_posterior_median_leaves_its_prior(small):
 def test_start_times_give_parking_time_at_fit_and_predict(monkeypatch):
     """A start_time column derives parked_min (warm cabins after short stops) at fit and predict."""
     from hybridev import VehicleParams, parked_minutes
-    from hybridev.learning import model as model_mod
+    from hybridev.learning import fitting as model_mod
 
     v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
     t = make_trips(24, seed=9).assign(temperature_c=-8.0)

@@ -1,4 +1,5 @@
-"""Tests of the probabilistic layer (hybridev.learning.uncertainty): intervals, distributions, SoC.
+"""Tests of the probabilistic predictions (hybridev.learning.pipeline and its steps):
+intervals, distributions, SoC.
 
 Data: a smooth synthetic truth ``E* = E_p (1 + f(x)) (1 + sigma(x) z)`` with
 ``f`` up to 17 % and a relative noise ``sigma`` from 1 % (40 km/h) to 6 %

@@ -1,0 +1,203 @@
+"""The calibrator of the hybrid model: conformal intervals from the raw distribution.
+
+:class:`Calibrator` turns a :class:`~hybridev.learning.steps.RawPrediction` into a
+:class:`~hybridev.learning.steps.CalibratedInterval` at a confidence level:
+
+* ``"split"``: normalised split conformal, ``mu +- q s`` with ``mu``, ``s`` the raw
+  distribution's mean and spread and ``q`` from calibration trips held out of every
+  other fitting step (:class:`~hybridev.learning.conformal.NormalizedConformal`);
+* ``"cv+"``: CV+ from the fold ensembles' means and spreads and the out-of-fold
+  scores (:class:`~hybridev.learning.conformal.CVPlusConformal`, fitted by
+  :func:`hybridev.learning.cvplus.fit_cv_plus`), widened to hold ``mu``. Out of the
+  training domain the CV+ interval is not used (its guarantee needs a trip exchangeable
+  with the training ones): those trips get the final model's own ``mu +- q s``;
+* ``"none"``: the raw distribution's own central interval (no conformal step);
+* with ``mondrian=True``, per bin of temperature band and trip length where a bin has
+  enough calibration trips for the level (:mod:`hybridev.learning.mondrian`).
+
+The one-sided lower bound ``lo_one`` (for trips that may empty the battery) is
+calibrated the same way. A level above ``n_cal / (n_cal + 1)`` cannot be calibrated
+and raises (:meth:`Calibrator.quantile`). Another calibrator (e.g. one per kind of
+trip) is another class with ``quantile``, ``spread_factor``, ``calibrate`` and
+``to_arrays`` / ``set_arrays``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hybridev.learning.conformal import (
+    CVPlusConformal,
+    NormalizedConformal,
+    min_calibration_trips,
+)
+from hybridev.learning.cvplus import (
+    nets_from_arrays,
+    nets_to_arrays,
+    physics_from_arrays,
+    physics_to_arrays,
+)
+from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
+from hybridev.learning.steps import CalibratedInterval, RawPrediction
+
+__all__ = ["Calibrator", "check_level"]
+
+
+def check_level(level) -> None:
+    """Raise ``ValueError`` unless ``level`` is a number in (0, 1)."""
+    ok = (isinstance(level, int | float | np.integer | np.floating)
+          and not isinstance(level, bool) and 0.0 < float(level) < 1.0)
+    if not ok:
+        raise ValueError(f"level={level!r} is outside the allowed range (0, 1) "
+                         "(a confidence level, e.g. 0.9)")
+
+
+class Calibrator:
+    """Split, CV+ or no conformal calibration, pooled or per Mondrian bin.
+
+    Parameters
+    ----------
+    mondrian : bool
+        Calibrate per bin where the data allow.
+
+    Attributes
+    ----------
+    conformal_ : NormalizedConformal, CVPlusConformal or None
+        The calibration scores (None: no conformal step).
+    fold_nets_ : list of EnsembleMLP
+        CV+ fold ensembles (empty otherwise).
+    fold_physics_ : list of (PhysicsPosterior, TermDiscrepancy or None)
+        Each CV+ fold's own physics (empty without a posterior).
+    cut_km_ : float
+        Distance cut of the Mondrian bins (median fitting trip), km.
+    bins_ : numpy.ndarray of int, shape (n_cal,)
+        Mondrian bin of each calibration score.
+    """
+
+    def __init__(self, *, mondrian: bool = False) -> None:
+        self.mondrian = bool(mondrian)
+        self.conformal_ = None
+        self.fold_nets_ = []
+        self.fold_physics_ = []
+
+    # -- fit ---------------------------------------------------------------------------
+    def fit_split(self, e_meas, mean, std) -> Calibrator:
+        """Split conformal from held-out trips' energies and raw means and spreads (kWh)."""
+        self.conformal_ = NormalizedConformal.fit(e_meas, mean, std)
+        return self
+
+    def set_cv_plus(self, nets: list, physics: list, conformal: CVPlusConformal) -> Calibrator:
+        """CV+ from :func:`hybridev.learning.cvplus.fit_cv_plus`'s output."""
+        self.fold_nets_, self.fold_physics_, self.conformal_ = nets, physics, conformal
+        return self
+
+    def fit_bins(self, cal_table, fit_table) -> Calibrator:
+        """Mondrian bins of the calibration trips; the cut is the fitting trips' median distance."""
+        self.cut_km_ = float(np.median(fit_table["distance_km"]))
+        self.bins_ = mondrian_bins(cal_table, self.cut_km_)
+        return self
+
+    # -- predict -----------------------------------------------------------------------
+    def folds(self) -> list:
+        """The CV+ fold ensembles when the scores are CV+ and every fold has one, else []."""
+        cp = self.conformal_
+        nets = self.fold_nets_ or []
+        return nets if isinstance(cp, CVPlusConformal) and len(nets) == cp.n_folds else []
+
+    def fold_physics(self) -> list:
+        """Each fold's physics (None: the model's) for :meth:`folds`."""
+        cv = self.folds()
+        return (self.fold_physics_ or [None] * len(cv)) if cv else []
+
+    def quantile(self, level: float) -> float | None:
+        """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""
+        check_level(level)
+        cp = self.conformal_
+        if cp is None:
+            return None
+        q = cp.quantile(level)
+        if not np.isfinite(q):
+            raise ValueError(
+                f"level={level!r} is too high for the {cp.n_calibration} calibration trips: "
+                f"the highest level they support is "
+                f"{cp.n_calibration / (cp.n_calibration + 1):.3f} (n / (n + 1)); use a lower "
+                f"level or fit on at least {min_calibration_trips(level)} trips"
+                + ("" if isinstance(cp, CVPlusConformal)
+                   else " (conformal='cv+' calibrates on every trip)"))
+        return q
+
+    def spread_factor(self, level: float) -> float:
+        """Multiplier on the raw spread for ``level`` (1 without a conformal step)."""
+        q = self.quantile(level)
+        return 1.0 if q is None else max(self.conformal_.spread_factor(level), 1e-6)
+
+    def calibrate(self, raw: RawPrediction, level: float, in_domain: np.ndarray
+                  ) -> CalibratedInterval:
+        """The calibrated interval of ``raw`` at ``level`` (see the module docstring).
+
+        ``in_domain`` (n_trips,) bool: trips outside the domain do not get the CV+ interval.
+        """
+        q = self.quantile(level)
+        cp, dist = self.conformal_, raw.dist
+        mu, sd = dist.mean(), dist.std()
+        cv = bool(raw.folds)
+        fm = fs = None
+        if cv:
+            fm = np.stack([d.mean() for d in raw.folds])
+            fs = np.maximum(np.stack([d.std() for d in raw.folds]), 1e-12)
+            lo, hi = cp.cv_interval(fm, fs, level)
+            lo_one = cp.cv_lower_bound(fm, fs, level)
+        elif q is not None:
+            lo, hi = mu - q * sd, mu + q * sd
+            lo_one = cp.lower_bound(mu, sd, level)
+        else:
+            lo, hi = dist.interval(level)
+            lo_one = dist.quantile(1.0 - level)
+        if self.mondrian and q is not None:  # per-bin calibration where the data allow
+            mlo, mhi, used = mondrian_interval(
+                cp, self.bins_, mondrian_bins(raw.table, self.cut_km_), level, mean=mu,
+                std=sd, fold_means=fm, fold_stds=fs)
+            lo, hi = np.where(used, mlo, lo), np.where(used, mhi, hi)
+        lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
+        ok = np.asarray(in_domain, dtype=bool)
+        if cv and not ok.all():  # out of the domain: the final model's own interval
+            lo = np.where(ok, lo, mu - q * sd)
+            hi = np.where(ok, hi, mu + q * sd)
+            lo_one = np.where(ok, lo_one, cp.lower_bound(mu, sd, level))
+        return CalibratedInterval(mean=mu, std=sd, lo=lo, hi=hi, lo_one=lo_one,
+                                  spread_factor=1.0, quantile=q)
+
+    # -- persistence -------------------------------------------------------------------
+    def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """``(json_doc, arrays)`` of the fitted calibrator (empty without a conformal step)."""
+        doc, arrays = {}, {}
+        cp = self.conformal_
+        if cp is None:
+            return doc, arrays
+        arrays["conformal_residuals"] = cp.residuals
+        if getattr(self, "bins_", None) is not None:
+            doc["mondrian_cut_km"] = self.cut_km_
+            arrays["conformal_bins"] = np.asarray(self.bins_, np.int64)
+        if self.folds():
+            doc["cv_folds"] = len(self.fold_nets_)
+            arrays["conformal_fold"] = cp.fold
+            arrays.update(nets_to_arrays(self.fold_nets_))
+            arrays.update(physics_to_arrays(self.fold_physics_ or []))
+        return doc, arrays
+
+    def set_arrays(self, doc: dict, arrays: dict[str, np.ndarray], *, learner=None,
+                   posterior=None) -> Calibrator:
+        """Inverse of :meth:`to_arrays`; ``learner`` rebuilds the fold ensembles and
+        ``posterior`` lends the folds' physics its metadata."""
+        if "conformal_residuals" in arrays:
+            self.conformal_ = NormalizedConformal(arrays["conformal_residuals"])
+        if "mondrian_cut_km" in doc:
+            self.cut_km_ = float(doc["mondrian_cut_km"])
+            self.bins_ = np.asarray(arrays["conformal_bins"], np.int64)
+        if "cv_folds" in doc:
+            n = int(doc["cv_folds"])
+            self.conformal_ = CVPlusConformal(arrays["conformal_residuals"],
+                                              arrays["conformal_fold"])
+            self.fold_nets_ = nets_from_arrays(learner, arrays, n)
+            self.fold_physics_ = physics_from_arrays(posterior, arrays, n)
+        return self

@@ -1,0 +1,85 @@
+"""Building the components of :class:`hybridev.HybridModel` from its settings.
+
+:func:`new_physics` and :func:`new_learner` make unfitted components of a model's
+current settings; :func:`restore` sets a model's fitted components from their saved
+state (:mod:`hybridev.learning.persist`); :class:`Part` keeps the learned attributes of
+the components readable on the model (``net_``, ``posterior_``, ``conformal_``, ...).
+"""
+
+from __future__ import annotations
+
+from hybridev.learning.calibrate import Calibrator
+from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.params import feature_names
+from hybridev.learning.physics_stage import PhysicsStage
+from hybridev.learning.residual import ResidualLearner
+from hybridev.physics.params import VehicleParams
+
+__all__ = ["NAMES", "Part", "new_learner", "new_physics", "restore"]
+
+NAMES = ("physics", "learner", "domain", "calibrator")
+"""The components, in the order a fit makes them (attributes ``physics_``, ...)."""
+
+_PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
+_NET_SETTINGS = ("n_members", "hidden", "dropout", "heteroscedastic", "max_epochs", "patience",
+                 "batch_size", "learning_rate", "weight_decay", "lr_decay", "lr_decay_every")
+
+
+class Part:
+    """A learned attribute kept by a component, read (and set) through the model.
+
+    ``Part("learner_")`` on the model class reads ``model.learner_.<name>``; an
+    absent component or attribute is an ``AttributeError`` (so ``hasattr`` and
+    ``getattr(model, name, None)`` behave as for a plain attribute).
+    """
+
+    def __init__(self, component: str, attr: str | None = None) -> None:
+        self.component, self.attr = component, attr
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name, self.attr = name, self.attr or name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        try:
+            return getattr(obj.__dict__[self.component], self.attr)
+        except (KeyError, AttributeError):
+            raise AttributeError(f"{type(obj).__name__!r} object has no attribute "
+                                 f"{self.name!r}") from None
+
+    def __set__(self, obj, value) -> None:
+        if obj.__dict__.get(self.component) is None:
+            raise AttributeError(f"{self.name}: the model has no {self.component} (not fitted)")
+        setattr(obj.__dict__[self.component], self.attr, value)
+
+
+def new_physics(model) -> PhysicsStage:
+    """An unfitted :class:`PhysicsStage` of ``model``'s settings (ValueError on a bad vehicle)."""
+    if model.vehicle is not None and not isinstance(model.vehicle, VehicleParams):
+        raise ValueError(f"{type(model).__name__}.vehicle must be a VehicleParams or None; "
+                         f"got {type(model.vehicle).__name__}")
+    return PhysicsStage(
+        model.vehicle or _PAPER_VEHICLE, n_steps=model.n_steps,
+        physics_seed=model.physics_seed, missing_mode=model.missing_mode,
+        physics_params=model.physics_params,
+        calibrate=bool(model.calibrate_physics) and model._residual,
+        discrepancy=bool(model.discrepancy), relative=model.residual_target == "relative")
+
+
+def new_learner(model) -> ResidualLearner:
+    """An unfitted :class:`ResidualLearner` of ``model``'s settings."""
+    return ResidualLearner(feature_names(model), residual=model._residual,
+                           relative=model.residual_target == "relative",
+                           **{k: getattr(model, k) for k in _NET_SETTINGS})
+
+
+def restore(model, parts: dict, fit_info: dict) -> None:
+    """Set ``model``'s components from their saved ``{name: (doc, arrays)}``."""
+    physics = new_physics(model).set_arrays(*parts["physics"])
+    learner = new_learner(model).set_arrays(*parts["learner"])
+    dom = parts["domain"][1]
+    model.domain_ = TrainingDomain.from_arrays(dom) if dom else None
+    model.calibrator_ = Calibrator(mondrian=model.mondrian).set_arrays(
+        *parts["calibrator"], learner=learner, posterior=physics.posterior_)
+    model.physics_, model.learner_, model.fit_info_ = physics, learner, fit_info

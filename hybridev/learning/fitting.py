@@ -1,0 +1,176 @@
+"""The data side of :meth:`hybridev.HybridModel.fit`: inputs, splits and the fit summary.
+
+:func:`fit_inputs` validates the measured trips (and their traces); :func:`split_trips`
+splits them, keeping whole groups together (:mod:`hybridev.learning.splits`), into
+calibration (split conformal), validation (early stopping) and training rows, and
+seeds every later random step from the fit seed; :func:`fit_calibrator` fits the
+calibrator once the physics, learner and domain are; :func:`fit_summary` is
+``fit_info_``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.core.errors import CalibrationWarning
+from hybridev.data.logs import MeasuredTrips
+from hybridev.data.measured import validate_measured_trips
+from hybridev.data.parked import with_parked_minutes
+from hybridev.data.timeseries import as_traces
+from hybridev.learning.calibrate import Calibrator
+from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
+from hybridev.learning.inputs import check_read_vehicle
+from hybridev.learning.params import conformal_mode
+from hybridev.learning.pipeline import raw_distributions
+from hybridev.learning.splits import group_codes, group_holdout
+
+__all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_inputs", "fit_summary", "split_trips"]
+
+
+@dataclass(frozen=True)
+class FitSplit:
+    """How :meth:`HybridModel.fit` uses each measured trip.
+
+    Attributes
+    ----------
+    codes : numpy.ndarray of int, shape (n_trips,)
+        Group of each trip.
+    mode : {"split", "cv+", "none"}
+        The conformal step.
+    cal, val, train : numpy.ndarray of int
+        Rows held out for split-conformal calibration, for early stopping, and the
+        training rows.
+    rest : numpy.ndarray of int
+        Every row but the calibration ones (the physics posterior's trips).
+    torch_ss, cv_ss : numpy.random.SeedSequence
+        Seeds of the network training and of the CV+ step.
+    """
+
+    codes: np.ndarray
+    mode: str
+    cal: np.ndarray
+    val: np.ndarray
+    train: np.ndarray
+    rest: np.ndarray
+    torch_ss: np.random.SeedSequence
+    cv_ss: np.random.SeedSequence
+
+
+def fit_inputs(model, measured_trips, timeseries) -> tuple[pd.DataFrame, object, pd.DataFrame]:
+    """``(valid_trips, traces, table)``: the validated measured trips, their traces and
+    the trip table as given (with ``parked_min`` derived from ``start_time``)."""
+    if isinstance(measured_trips, MeasuredTrips):
+        traces = measured_trips.traces if timeseries is None else as_traces(timeseries)
+        check_read_vehicle(measured_trips.vehicle, model.vehicle)
+        measured_trips = measured_trips.trips
+    else:
+        traces = as_traces(timeseries)
+        measured_trips = with_parked_minutes(measured_trips, traces)
+    try:
+        good, _ = validate_measured_trips(measured_trips, model._vehicle(), on_error="raise")
+    except ValueError as err:
+        if traces is None or "missing required column" not in str(err):
+            raise
+        raise ValueError(f"{err}; from logged traces, hybridev.read_measured_trips (files) or "
+                         "hybridev.data.logs.measured_from_frames (tables) derive "
+                         "distance_km, avg_speed_kmh and temperature_c") from None
+    return good, traces, measured_trips
+
+
+def split_trips(model, good: pd.DataFrame, table: pd.DataFrame, groups, seed: int
+                ) -> FitSplit:
+    """Calibration, validation and training rows of ``good`` (see :class:`FitSplit`).
+
+    Raises ``ValueError`` when the trips are too few for the settings; warns
+    (:class:`CalibrationWarning`) when given groups put every trip in one group.
+    """
+    n = len(good)
+    codes = group_codes(groups, table, n)
+    if groups is not None and not (isinstance(groups, str) and groups == "auto") \
+            and len(np.unique(codes)) < 2 and n > 1:
+        warnings.warn(f"groups: all {n} trips are in one group, so no split can keep groups "
+                      "apart; every trip is its own group instead (coverage on new groups "
+                      "is not assessed)", CalibrationWarning, stacklevel=3)
+        codes = np.arange(n)
+    split_ss, torch_ss, cv_ss = np.random.SeedSequence(int(seed)).spawn(3)
+    rng = np.random.default_rng(split_ss)
+    mode = conformal_mode(model, n)
+    cal = (group_holdout(codes, model.conformal_fraction, rng) if mode == "split"
+           else np.zeros(n, dtype=bool))
+    rest = np.flatnonzero(~cal)
+    val = np.zeros(n, dtype=bool)
+    if model.val_fraction > 0:
+        val[rest[group_holdout(codes[rest], model.val_fraction, rng)]] = True
+    cal_idx, val_idx = np.flatnonzero(cal), np.flatnonzero(val)
+    tr_idx = np.flatnonzero(~cal & ~val)
+    if len(tr_idx) < 1 or (mode == "split" and len(cal_idx) < 1) or (
+            model.val_fraction > 0 and len(val_idx) < 1) or (mode == "cv+" and len(
+            np.unique(codes)) < 2):
+        raise ValueError(f"measured trips: {n} valid row(s) in {len(np.unique(codes))} "
+                         f"group(s) are too few to fit with val_fraction="
+                         f"{model.val_fraction!r}, conformal={model.conformal!r} and "
+                         f"conformal_fraction={model.conformal_fraction!r}")
+    return FitSplit(codes, mode, cal_idx, val_idx, tr_idx, rest, torch_ss, cv_ss)
+
+
+def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.ndarray,
+                   ys: np.ndarray, e_meas: np.ndarray, seed: int) -> Calibrator:
+    """The calibrator of a model whose physics, learner and domain are fitted.
+
+    Split conformal scores the held-out trips with the model's raw distribution; CV+
+    trains the fold ensembles (:func:`hybridev.learning.cvplus.fit_cv_plus`). Both
+    record the Mondrian bins (cut at the fitting trips' median distance).
+    """
+    cal = Calibrator(mondrian=model.mondrian)
+    if len(split.cal):
+        dist = raw_distributions(model, good.iloc[split.cal], traces, seed=int(seed))[0][0]
+        cal.fit_split(e_meas[split.cal], dist.mean(), dist.std())
+    elif split.mode == "cv+":
+        cal.set_cv_plus(*fit_cv_plus(
+            model.physics_, model.learner_, lambda t, tr, s, nets, ph: raw_distributions(
+                model, t, tr, seed=s, nets=nets, physics=ph)[0],
+            good, traces, split.codes, xs, ys, e_meas, seed, split.cv_ss,
+            cv_folds=int(model.cv_folds), val_fraction=model.val_fraction))
+    warn_calibration(cal.conformal_, split.codes, split.cal)
+    return cal.fit_bins(good.iloc[split.cal] if len(split.cal) else good, good)
+
+
+def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
+                training: tuple) -> dict:
+    """``fit_info_`` (before ``trace_gap_rel`` and ``fit_seconds``).
+
+    ``training``: ``(xs, e_meas, e_phys, scale)``, the standardised inputs, measured
+    and physics energies (kWh) and target scales of every trip, for the validation
+    errors.
+    """
+    learner = model.learner_
+    hist = learner.history_
+    info = {"n_trips": len(good), "n_train": len(split.train), "n_val": len(split.val),
+            "n_cal": len(split.cal), "n_groups": len(np.unique(split.codes)),
+            "conformal": split.mode, "cv_folds": len(model.calibrator_.fold_nets_),
+            "seed": int(seed), **model.fit_info_, "n_epochs": hist["n_epochs"],
+            "best_epoch": hist["best_epoch"].tolist(),
+            "n_parameters_per_member": model.learner_.n_parameters_}
+    if heater is not None:
+        info["heater"] = heater.to_dict()
+    if "parked_min" in good.columns:  # parking time (from start_time): what the fit saw
+        pk = pd.to_numeric(good["parked_min"], errors="coerce").to_numpy(float)
+        info["parking"] = {"n_known": int(np.isfinite(pk).sum()),
+                           "n_short_stop": int((pk < 30.0).sum())}
+    if len(split.val):
+        xs, e_meas, e_phys, scale = training
+        v = split.val
+        pred = learner.combine(e_phys[v], learner.moments(xs[v], scale[v])[0].mean(0))
+        info["val_mae_kwh_physics"] = float(np.mean(np.abs(e_meas[v] - e_phys[v])))
+        info["val_mae_kwh_model"] = float(np.mean(np.abs(e_meas[v] - pred)))
+    return info
+
+
+def elapsed(t0: float) -> float:
+    """Seconds since ``t0`` (``time.perf_counter``), rounded to ms."""
+    return round(time.perf_counter() - t0, 3)

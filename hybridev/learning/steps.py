@@ -1,0 +1,183 @@
+"""The values passed between the steps of the hybrid model's predictive path.
+
+Each step of :func:`hybridev.learning.pipeline.predictive_path` takes and returns one of
+these (or :class:`~hybridev.learning.predictive.EnergyDistribution`); see
+``docs/architecture.md``. They hold arrays and tables only: no step calls back into
+another.
+
+==========================  ======================================  =====================
+value                       made by                                 read by
+==========================  ======================================  =====================
+:class:`PhysicsDraws`       physics stage                           domain, residual
+:class:`DomainAssessment`   training domain                         physics fade, OOD
+:class:`RawPrediction`      residual learner + distribution builder calibrator, OOD
+:class:`CalibratedInterval` calibrator                              OOD, output
+==========================  ======================================  =====================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from hybridev.physics.trips import append_columns, with_physics_columns
+
+__all__ = ["CalibratedInterval", "DomainAssessment", "PhysicsDraws", "RawPrediction"]
+
+
+@dataclass
+class PhysicsDraws:
+    """The physics of a batch of trips (output of :meth:`PhysicsStage.transform`).
+
+    Attributes
+    ----------
+    table : pandas.DataFrame, (n_trips, ...)
+        The validated trips (``mode`` ``None`` where unknown); with the physics columns
+        once :meth:`faded` (or from the start without a posterior).
+    columns : dict of str to numpy.ndarray
+        The table's columns the point prediction reads, as arrays.
+    append : dict of str to numpy.ndarray
+        Physics columns still to append to ``table`` (the fast path without a posterior).
+    energies : list of numpy.ndarray, each (1 + n_draws, n_trips), kWh
+        Per physics (the model's, then each CV+ fold's): the posterior median, then the
+        draws, with the discrepancy at full weight; the nominal physics (one row)
+        without a posterior.
+    plain : list of callable or None
+        Per physics: the same energies without the discrepancy (``None`` without one),
+        for :meth:`faded`.
+    n_draws : int
+    max_speed_kmh : numpy.ndarray or None
+        Per trip, for the table's ``max_speed_kmh`` (posterior physics).
+    capacity_kwh : float
+    modes : dict of str to PhysicsDraws
+        For trips lacking the mode every training trip had: their physics under each
+        mode (by name); empty otherwise.
+    tables : list of pandas.DataFrame
+        Per physics, its table (after :meth:`faded`).
+    """
+
+    table: pd.DataFrame
+    columns: dict = field(default_factory=dict)
+    append: dict = field(default_factory=dict)
+    energies: list = field(default_factory=list)
+    plain: list = field(default_factory=list)
+    n_draws: int = 0
+    max_speed_kmh: np.ndarray | None = None
+    capacity_kwh: float = 0.0
+    modes: dict = field(default_factory=dict)
+    tables: list = field(default_factory=list)
+
+    @property
+    def posterior(self) -> bool:
+        """Whether the energies come from a posterior (their table waits for the fade)."""
+        return self.max_speed_kmh is not None
+
+    def faded(self, fade: np.ndarray | None, mode_fade: np.ndarray | None = None
+              ) -> PhysicsDraws:
+        """The physics with each trip's discrepancy weighted by ``fade`` (n_trips,).
+
+        ``E = E_plain + fade (E - E_plain)``; ``None``: weight 1 for every trip.
+        ``mode_fade``: the same for the trips of :attr:`modes`. Builds :attr:`tables`.
+        """
+        modes = {m: d.faded(mode_fade) for m, d in self.modes.items()}
+        if not self.posterior:
+            full = append_columns(self.table, self.append) if self.append else self.table
+            return replace(self, tables=[full] * len(self.energies), modes=modes)
+        energies, tables = [], []
+        for energy, plain in zip(self.energies, self.plain, strict=True):
+            if fade is not None and plain is not None:
+                p = plain()
+                energy = p + fade * (energy - p)
+            energies.append(energy[1:] if self.n_draws else energy[:1])
+            tables.append(with_physics_columns(self.table, energy[0], self.max_speed_kmh,
+                                               self.capacity_kwh))
+        return replace(self, energies=energies, tables=tables, table=tables[0],
+                       columns={}, modes=modes)
+
+    def draws(self, entry: int = 0) -> np.ndarray:
+        """Physics energies of posterior draws of ``entry`` (after :meth:`faded`), kWh."""
+        if self.posterior:
+            return self.energies[entry]
+        return self.tables[entry]["energy_kwh_physics"].to_numpy(float)[None, :]
+
+
+@dataclass
+class DomainAssessment:
+    """How far each trip lies from the training domain (:meth:`TrainingDomain.assess`).
+
+    Attributes
+    ----------
+    score : numpy.ndarray, shape (n_trips,)
+        ``domain_score``: the largest gap, at least 2 for a missing trained-with input.
+    in_domain : numpy.ndarray of bool, shape (n_trips,)
+    gap : numpy.ndarray, shape (n_trips,)
+        Largest gap over the domain quantities (in tolerances), missing inputs aside.
+    no_trace, no_mode : numpy.ndarray of bool, shape (n_trips,)
+        Trips lacking a logged trace / a mode the model was trained with.
+    reasons : dict of str to int
+        Trips out of the domain per reason (:meth:`TrainingDomain.reasons`).
+    fade, mode_fade : numpy.ndarray or None
+        The discrepancy's weight per trip (and per trip lacking a trained-with mode),
+        None where it is 1 for every trip.
+    """
+
+    score: np.ndarray
+    in_domain: np.ndarray
+    gap: np.ndarray
+    no_trace: np.ndarray
+    no_mode: np.ndarray
+    reasons: dict
+    fade: np.ndarray | None = None
+    mode_fade: np.ndarray | None = None
+
+
+@dataclass
+class RawPrediction:
+    """The uncalibrated prediction of a batch of trips.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame, (n_trips, ...)
+        Validated trips with the physics columns.
+    dist : EnergyDistribution
+        The raw predictive distribution of the fitted model (spread factor 1).
+    folds : list of EnergyDistribution
+        The same from each CV+ fold model (empty without CV+).
+    mode_means : numpy.ndarray, shape (3, n_no_mode), kWh, or None
+        Point energies of the trips lacking a trained-with mode under each of the three
+        modes (see :mod:`hybridev.learning.ood`).
+    """
+
+    table: pd.DataFrame
+    dist: EnergyDistribution  # noqa: F821 (hybridev.learning.predictive)
+    folds: list = field(default_factory=list)
+    mode_means: np.ndarray | None = None
+
+
+@dataclass
+class CalibratedInterval:
+    """Conformally calibrated energy interval per trip, kWh (before the out-of-domain step).
+
+    Attributes
+    ----------
+    mean, std : numpy.ndarray, shape (n_trips,)
+        Mean and spread of the raw distribution.
+    lo, hi : numpy.ndarray, shape (n_trips,)
+        Two-sided interval at the level, holding ``mean``.
+    lo_one : numpy.ndarray, shape (n_trips,)
+        One-sided lower bound at the level (for trips that may empty the battery).
+    spread_factor : float
+        The calibrator's multiplier on the raw spread (1 when uncalibrated).
+    quantile : float or None
+        The conformal quantile ``q`` of the level (None when uncalibrated).
+    """
+
+    mean: np.ndarray
+    std: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    lo_one: np.ndarray
+    spread_factor: float = 1.0
+    quantile: float | None = None
