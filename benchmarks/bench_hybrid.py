@@ -78,13 +78,16 @@ def size_on_disk(model: HybridModel, where: Path) -> dict[str, int]:
     """Bytes of ``model.json``, ``arrays.npz`` and of parts of ``arrays.npz`` (compressed)."""
     model.save(where)
     parts = bench.npz_entry_sizes(where / ARRAYS_FILE)
-    net = sum(v for k, v in parts.items()
-              if k.startswith("net.") or k in ("feature_mean", "feature_std"))
+    # model format 3: the learner's arrays are "learner.*"; the rest (posterior,
+    # discrepancy, domain, calibration) is "physics.*", "domain.*", "calibrator.*"
+    net = sum(v for k, v in parts.items() if k.startswith("learner.net.")
+              or k in ("learner.feature_mean", "learner.feature_std"))
+    curves = parts.get("learner.train_loss", 0) + parts.get("learner.val_loss", 0)
     return {"json": (where / DOC_FILE).stat().st_size,
             "npz": (where / ARRAYS_FILE).stat().st_size,
             "net_scalers": net,
-            "curves": parts.get("train_loss", 0) + parts.get("val_loss", 0),
-            "extra": sum(v for k, v in parts.items() if k.startswith("extra."))}
+            "curves": curves,
+            "extra": sum(v for k, v in parts.items() if not k.startswith("learner."))}
 
 
 def main(argv=None) -> int:

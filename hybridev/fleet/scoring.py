@@ -148,5 +148,5 @@ def predict_interval_dask(model, trips, level: float = 0.9, *, seed: int = 0, ti
     Bad ``level`` or an unfitted model fail at once (not at compute time).
     """
     model._require_probabilistic("predict_interval")
-    model._conformal_factor(level)  # checks level now
+    model._check_level(level)  # checks level now
     return _lazy(model, trips, "predict_interval", {"level": level, "seed": seed}, timeseries)

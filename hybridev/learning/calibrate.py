@@ -26,30 +26,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from hybridev.learning.conformal import (
-    CVPlusConformal,
-    NormalizedConformal,
-    min_calibration_trips,
-)
+from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal, binned_interval
 from hybridev.learning.cvplus import (
     nets_from_arrays,
     nets_to_arrays,
     physics_from_arrays,
     physics_to_arrays,
 )
-from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
+from hybridev.learning.inputs import check_calibration_level
+from hybridev.learning.mondrian import mondrian_bins, mondrian_plan
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
 
-__all__ = ["Calibrator", "check_level"]
-
-
-def check_level(level) -> None:
-    """Raise ``ValueError`` unless ``level`` is a number in (0, 1)."""
-    ok = (isinstance(level, int | float | np.integer | np.floating)
-          and not isinstance(level, bool) and 0.0 < float(level) < 1.0)
-    if not ok:
-        raise ValueError(f"level={level!r} is outside the allowed range (0, 1) "
-                         "(a confidence level, e.g. 0.9)")
+__all__ = ["Calibrator"]
 
 
 class Calibrator:
@@ -111,20 +99,10 @@ class Calibrator:
 
     def quantile(self, level: float) -> float | None:
         """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""
-        check_level(level)
         cp = self.conformal_
-        if cp is None:
-            return None
-        q = cp.quantile(level)
-        if not np.isfinite(q):
-            raise ValueError(
-                f"level={level!r} is too high for the {cp.n_calibration} calibration trips: "
-                f"the highest level they support is "
-                f"{cp.n_calibration / (cp.n_calibration + 1):.3f} (n / (n + 1)); use a lower "
-                f"level or fit on at least {min_calibration_trips(level)} trips"
-                + ("" if isinstance(cp, CVPlusConformal)
-                   else " (conformal='cv+' calibrates on every trip)"))
-        return q
+        check_calibration_level(level, None if cp is None else len(cp.residuals),
+                                cv_plus=isinstance(cp, CVPlusConformal))
+        return None if cp is None else cp.quantile(level)
 
     def spread_factor(self, level: float) -> float:
         """Multiplier on the raw spread for ``level`` (1 without a conformal step)."""
@@ -133,37 +111,39 @@ class Calibrator:
 
     def calibrate(self, raw: RawPrediction, level: float, in_domain: np.ndarray
                   ) -> CalibratedInterval:
-        """The calibrated interval of ``raw`` at ``level`` (see the module docstring).
+        """Step 5: the calibrated interval of ``raw`` at ``level`` (see the module docstring).
 
         ``in_domain`` (n_trips,) bool: trips outside the domain do not get the CV+ interval.
+        The Mondrian bins are chosen first, then every interval comes from the scores.
         """
-        q = self.quantile(level)
-        cp, dist = self.conformal_, raw.dist
-        mu, sd = dist.mean(), dist.std()
-        cv = bool(raw.folds)
-        fm = fs = None
+        cp = self.conformal_
+        calibrated = cp is not None
+        plan = (mondrian_plan(self.bins_, mondrian_bins(raw.table, self.cut_km_), level)
+                if self.mondrian and calibrated else [])
+        mu, sd, fm, fs = raw.mean, raw.std, raw.fold_means, raw.fold_stds
+        cv = fm is not None
+        q = cp.quantile(level) if calibrated else None
         if cv:
-            fm = np.stack([d.mean() for d in raw.folds])
-            fs = np.maximum(np.stack([d.std() for d in raw.folds]), 1e-12)
             lo, hi = cp.cv_interval(fm, fs, level)
             lo_one = cp.cv_lower_bound(fm, fs, level)
-        elif q is not None:
+        elif calibrated:
             lo, hi = mu - q * sd, mu + q * sd
             lo_one = cp.lower_bound(mu, sd, level)
         else:
-            lo, hi = dist.interval(level)
-            lo_one = dist.quantile(1.0 - level)
-        if self.mondrian and q is not None:  # per-bin calibration where the data allow
-            mlo, mhi, used = mondrian_interval(
-                cp, self.bins_, mondrian_bins(raw.table, self.cut_km_), level, mean=mu,
-                std=sd, fold_means=fm, fold_stds=fs)
+            lo, hi = raw.dist.interval(level)
+            lo_one = raw.dist.quantile(1.0 - level)
+        if plan:  # per-bin calibration where the data allow
+            mlo, mhi, used = binned_interval(cp, plan, level, mean=mu, std=sd, fold_means=fm,
+                                             fold_stds=fs)
             lo, hi = np.where(used, mlo, lo), np.where(used, mhi, hi)
-        lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
         ok = np.asarray(in_domain, dtype=bool)
         if cv and not ok.all():  # out of the domain: the final model's own interval
+            lo_split = cp.lower_bound(mu, sd, level)
+        lo, hi = np.minimum(lo, mu), np.maximum(hi, mu)  # CV+ bounds need not hold mu
+        if cv and not ok.all():
             lo = np.where(ok, lo, mu - q * sd)
             hi = np.where(ok, hi, mu + q * sd)
-            lo_one = np.where(ok, lo_one, cp.lower_bound(mu, sd, level))
+            lo_one = np.where(ok, lo_one, lo_split)
         return CalibratedInterval(mean=mu, std=sd, lo=lo, hi=hi, lo_one=lo_one,
                                   spread_factor=1.0, quantile=q)
 

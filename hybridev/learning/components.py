@@ -1,21 +1,29 @@
-"""Building the components of :class:`hybridev.HybridModel` from its settings.
+"""Building the components of :class:`hybridev.HybridModel` from its settings, and the
+checks of what a model's components can do.
 
 :func:`new_physics` and :func:`new_learner` make unfitted components of a model's
 current settings; :func:`restore` sets a model's fitted components from their saved
 state (:mod:`hybridev.learning.persist`); :class:`Part` keeps the learned attributes of
-the components readable on the model (``net_``, ``posterior_``, ``conformal_``, ...).
+the components readable on the model (``net_``, ``posterior_``, ``conformal_``, ...);
+:func:`require_fitted`, :func:`require_probabilistic` and :func:`check_level` raise
+before any work when a prediction cannot be made.
 """
 
 from __future__ import annotations
 
+from sklearn.exceptions import NotFittedError
+
 from hybridev.learning.calibrate import Calibrator
+from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.inputs import check_calibration_level
 from hybridev.learning.params import feature_names
 from hybridev.learning.physics_stage import PhysicsStage
 from hybridev.learning.residual import ResidualLearner
 from hybridev.physics.params import VehicleParams
 
-__all__ = ["NAMES", "Part", "new_learner", "new_physics", "restore"]
+__all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "require_fitted",
+           "require_probabilistic", "restore"]
 
 NAMES = ("physics", "learner", "domain", "calibrator")
 """The components, in the order a fit makes them (attributes ``physics_``, ...)."""
@@ -83,3 +91,34 @@ def restore(model, parts: dict, fit_info: dict) -> None:
     model.calibrator_ = Calibrator(mondrian=model.mondrian).set_arrays(
         *parts["calibrator"], learner=learner, posterior=physics.posterior_)
     model.physics_, model.learner_, model.fit_info_ = physics, learner, fit_info
+
+
+def require_fitted(model) -> None:
+    """Raise ``NotFittedError`` unless ``model``'s residual learner is fitted."""
+    if not model.fitted():
+        raise NotFittedError(f"this {type(model).__name__} is not fitted yet; call "
+                             "fit(measured_trips) first (or load a fitted model)")
+
+
+def require_probabilistic(model, what: str) -> None:
+    """Raise unless ``model`` is fitted and has a predictive spread for ``what``."""
+    name = type(model).__name__
+    if not model.fitted():
+        raise NotFittedError(
+            f"this {name} is not fitted yet: {what} needs the fitted network and its "
+            "calibration; call fit(measured_trips) first or load a fitted model "
+            "(predict() alone falls back to the physics)")
+    if not (int(model.n_members) > 1 or bool(model.heteroscedastic)
+            or model.physics_.posterior_ is not None):
+        raise ValueError(
+            f"this {name} has no predictive spread (n_members=1, heteroscedastic=False, "
+            "no physics posterior: the paper's point model), so it has no "
+            f"{what}; fit with n_members >= 2, heteroscedastic=True or "
+            "calibrate_physics=True (the defaults) for one")
+
+
+def check_level(model, level) -> None:
+    """Raise ``ValueError`` unless ``model``'s calibration gives intervals at ``level``."""
+    cp = model.calibrator_.conformal_
+    check_calibration_level(level, None if cp is None else len(cp.residuals),
+                            cv_plus=isinstance(cp, CVPlusConformal))

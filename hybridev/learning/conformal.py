@@ -28,7 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-__all__ = ["CVPlusConformal", "NormalizedConformal", "min_calibration_trips"]
+from hybridev.learning.inputs import min_calibration_trips
+
+__all__ = ["CVPlusConformal", "NormalizedConformal", "binned_interval",
+           "min_calibration_trips"]
 
 
 @dataclass(frozen=True)
@@ -117,20 +120,6 @@ class NormalizedConformal:
 
 
 _CV_BLOCK = 16_384  # test columns per block of the (n_cal, n_test) CV+ matrices
-
-
-def min_calibration_trips(level: float) -> int:
-    """Fewest calibration scores ``n`` with ``ceil((n + 1) level) <= n`` (9 for 0.9).
-
-    Examples
-    --------
-    >>> min_calibration_trips(0.9), min_calibration_trips(0.8), min_calibration_trips(0.95)
-    (9, 4, 19)
-    """
-    n = max(math.floor(level / (1.0 - level)) - 1, 1)
-    while math.ceil((n + 1) * level) > n:
-        n += 1
-    return n
 
 
 def _kth(values: np.ndarray, k: int) -> np.ndarray:
@@ -249,3 +238,33 @@ class CVPlusConformal(NormalizedConformal):
             m, v = mu[self.fold, s:s + _CV_BLOCK], sd[self.fold, s:s + _CV_BLOCK]
             out[s:s + _CV_BLOCK] = -_kth(-(m + r * v), k)
         return out
+
+
+def binned_interval(cp: NormalizedConformal, plan, level: float, *, mean=None, std=None,
+                    fold_means=None, fold_stds=None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Intervals of groups of trips each calibrated on a subset of ``cp``'s scores.
+
+    ``plan``: ``[(rows, scores), ...]`` boolean masks of the trips (n_trips,) and of
+    their calibration scores (n_cal,) (:func:`hybridev.learning.mondrian.mondrian_plan`).
+    Split conformal uses ``mean`` and ``std`` (n_trips,); CV+ (a
+    :class:`CVPlusConformal` ``cp``) ``fold_means`` and ``fold_stds`` (n_folds, n_trips),
+    the folds renumbered to those present in the subset. Returns ``lo, hi`` (NaN
+    outside the groups) and ``used`` (n_trips,) bool.
+    """
+    n = len(mean) if fold_means is None else np.shape(fold_means)[1]
+    lo, hi = np.full(n, np.nan), np.full(n, np.nan)
+    used = np.zeros(n, dtype=bool)
+    for rows, sel_cal in plan:
+        if isinstance(cp, CVPlusConformal):
+            fold = cp.fold[sel_cal]
+            keep = np.unique(fold)
+            remap = np.searchsorted(keep, fold)
+            sub = CVPlusConformal(cp.residuals[sel_cal], remap)
+            lo[rows], hi[rows] = sub.cv_interval(fold_means[keep][:, rows],
+                                                 fold_stds[keep][:, rows], level)
+        else:
+            sub = NormalizedConformal(cp.residuals[sel_cal])
+            lo[rows], hi[rows] = sub.interval(mean[rows], std[rows], level)
+        used[rows] = True
+    return lo, hi, used

@@ -3,9 +3,9 @@
 :func:`fit_inputs` validates the measured trips (and their traces); :func:`split_trips`
 splits them, keeping whole groups together (:mod:`hybridev.learning.splits`), into
 calibration (split conformal), validation (early stopping) and training rows, and
-seeds every later random step from the fit seed; :func:`fit_calibrator` fits the
-calibrator once the physics, learner and domain are; :func:`fit_summary` is
-``fit_info_``.
+seeds every later random step from the fit seed; :func:`fit_physics`,
+:func:`fit_learner` and :func:`fit_calibrator` fit the components in that order
+(:meth:`HybridModel.fit` runs them); :func:`fit_summary` is ``fit_info_``.
 """
 
 from __future__ import annotations
@@ -17,19 +17,24 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from hybridev.bayes.checks import warn_unphysical
 from hybridev.core.errors import CalibrationWarning
 from hybridev.data.logs import MeasuredTrips
 from hybridev.data.measured import validate_measured_trips
 from hybridev.data.parked import with_parked_minutes
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.calibrate import Calibrator
+from hybridev.learning.components import new_learner, new_physics
 from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
+from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.features import trip_features
 from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.splits import group_codes, group_holdout
 
-__all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_inputs", "fit_summary", "split_trips"]
+__all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_inputs", "fit_learner", "fit_physics",
+           "fit_summary", "split_trips"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +121,42 @@ def split_trips(model, good: pd.DataFrame, table: pd.DataFrame, groups, seed: in
                          f"{model.val_fraction!r}, conformal={model.conformal!r} and "
                          f"conformal_fraction={model.conformal_fraction!r}")
     return FitSplit(codes, mode, cal_idx, val_idx, tr_idx, rest, torch_ss, cv_ss)
+
+
+def fit_physics(model, good: pd.DataFrame, split: FitSplit, traces, seed: int):
+    """Step 1 of the fit: ``(physics_stage, heater_selection)`` on every trip but the
+    calibration ones (heater kind, posterior, discrepancy; warns on an unphysical
+    posterior median, :func:`hybridev.bayes.checks.warn_unphysical`)."""
+    rest = good.iloc[split.rest]
+    physics = new_physics(model)
+    heater = physics.select_heater(rest, traces, split.codes[split.rest])
+    physics.fit(rest, seed, traces)
+    if physics.posterior_ is not None:
+        warn_unphysical(physics.posterior_)
+    return physics, heater
+
+
+def fit_learner(model, good: pd.DataFrame, phys: pd.DataFrame, split: FitSplit, traces,
+                progress=None):
+    """Step 2 of the fit: ``(learner, domain, (xs, ys, e_meas, e_phys, scale))``.
+
+    The residual learner is standardised on and trained on the training rows (early
+    stopping on the validation rows) against the physics table ``phys`` of every trip;
+    the training domain records every trip. Returns the standardised inputs and
+    targets, the measured and physics energies (kWh) and the target scales of every
+    trip, for the calibrator and the summary.
+    """
+    learner = new_learner(model)
+    x = trip_features(phys, learner.feature_names)
+    e_meas = good["energy_kwh"].to_numpy(float)
+    e_phys = phys["energy_kwh_physics"].to_numpy(float)
+    scale = learner.target_scale(e_phys, good["distance_km"].to_numpy(float))
+    y = (e_meas - e_phys) / scale if learner.residual else e_meas
+    xs, ys = learner.fit_scalers(x[split.train], y[split.train]).scaled(x, y)
+    domain = TrainingDomain.fit(phys, xs, traces=traces)
+    learner.fit(xs, ys, split.train, split.val, int(split.torch_ss.generate_state(1)[0]),
+                progress)
+    return learner, domain, (xs, ys, e_meas, e_phys, scale)
 
 
 def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.ndarray,

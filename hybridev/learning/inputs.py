@@ -16,7 +16,8 @@ from hybridev.learning.features import (
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.validation import TRIP_RULES, check_table
 
-__all__ = ["check_read_vehicle", "unpack_trips", "validate_prediction_trips"]
+__all__ = ["check_calibration_level", "check_level", "check_read_vehicle",
+           "min_calibration_trips", "unpack_trips", "validate_prediction_trips"]
 
 
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
@@ -49,6 +50,56 @@ def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = Fals
         kind = "an integer " if integer else ""
         raise ValueError(f"{name}={value!r} must be {kind}in "
                          f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}")
+
+
+def min_calibration_trips(level: float) -> int:
+    """Fewest calibration scores ``n`` with ``ceil((n + 1) level) <= n`` (9 for 0.9).
+
+    Examples
+    --------
+    >>> min_calibration_trips(0.9), min_calibration_trips(0.8), min_calibration_trips(0.95)
+    (9, 4, 19)
+    """
+    n = max(math.floor(level / (1.0 - level)) - 1, 1)
+    while math.ceil((n + 1) * level) > n:
+        n += 1
+    return n
+
+
+def check_level(level) -> None:
+    """Raise ``ValueError`` unless ``level`` is a number in (0, 1)."""
+    ok = (isinstance(level, int | float | np.integer | np.floating)
+          and not isinstance(level, bool) and 0.0 < float(level) < 1.0)
+    if not ok:
+        raise ValueError(f"level={level!r} is outside the allowed range (0, 1) "
+                         "(a confidence level, e.g. 0.9)")
+
+
+def check_calibration_level(level, n_calibration: int | None, *, cv_plus: bool = False) -> None:
+    """Raise ``ValueError`` when ``n_calibration`` conformal scores cannot calibrate ``level``.
+
+    ``ceil((n + 1) level) > n`` leaves no order statistic for the level; ``None``: no
+    conformal step (any level in (0, 1)).
+
+    Examples
+    --------
+    >>> check_calibration_level(0.9, 9)
+    >>> check_calibration_level(0.95, 9)
+    Traceback (most recent call last):
+    ...
+    ValueError: level=0.95 is too high for the 9 calibration trips: ...
+    """
+    check_level(level)
+    if n_calibration is None:
+        return
+    n = int(n_calibration)
+    if math.ceil((n + 1) * level) > n:
+        need = min_calibration_trips(level)
+        raise ValueError(
+            f"level={level!r} is too high for the {n} calibration trips: the highest level "
+            f"they support is {n / (n + 1):.3f} (n / (n + 1)); use a lower level or fit on "
+            f"at least {need} trips" + ("" if cv_plus
+                                         else " (conformal='cv+' calibrates on every trip)"))
 
 
 def unpack_trips(trips, timeseries=None):

@@ -3,12 +3,9 @@
 ``E_h = E_p + dE``: the physics gives ``E_p``; an ensemble of small networks trained on
 measured trips predicts the residual ``dE = E* - E_p`` from the trip features; the
 final SoC is ``max(0, s0 - E_h / C)``. :class:`HybridModel` *has* one component per
-job (``docs/architecture.md``): the physics stage ``physics_``
-(:mod:`~hybridev.learning.physics_stage`: vehicle, posterior, discrepancy), the
-residual learner ``learner_`` (:mod:`~hybridev.learning.residual`), the training
-domain ``domain_`` (:mod:`~hybridev.learning.domain`) and the calibrator
-``calibrator_`` (:mod:`~hybridev.learning.calibrate`). ``fit`` makes them in that
-order (:mod:`~hybridev.learning.fitting` splits the trips); every prediction runs
+job (the physics stage, residual learner, training domain and calibrator;
+``docs/architecture.md``); ``fit`` makes them in that order
+(:mod:`~hybridev.learning.fitting`) and every prediction runs
 :func:`~hybridev.learning.pipeline.predictive_path`.
 
 Conventions beyond the paper: trips without a ``mode`` use a uniform one-hot and the
@@ -30,17 +27,21 @@ from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
-from sklearn.exceptions import NotFittedError
 
-from hybridev.bayes.checks import warn_unphysical
 from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
 from hybridev.learning import fitting
-from hybridev.learning.components import NAMES, Part, new_learner, new_physics, restore
-from hybridev.learning.domain import TrainingDomain
-from hybridev.learning.features import FEATURE_NAMES, trip_features
+from hybridev.learning.components import (
+    NAMES,
+    Part,
+    check_level,
+    new_physics,
+    require_fitted,
+    require_probabilistic,
+)
+from hybridev.learning.features import FEATURE_NAMES
 from hybridev.learning.inputs import _check_range, unpack_trips
 from hybridev.learning.ood import trace_gap
 from hybridev.learning.params import (
@@ -59,13 +60,8 @@ from hybridev.learning.predictive import EnergyDistribution
 from hybridev.learning.refit import RefitGuardMixin
 from hybridev.physics.params import VehicleParams
 
-__all__ = [
-    "CONFORMAL_MODES",
-    "CV_PLUS_MAX_TRIPS",
-    "PAPER_CONFIG",
-    "VAL_FRACTION",
-    "HybridModel",
-]
+__all__ = ["CONFORMAL_MODES", "CV_PLUS_MAX_TRIPS", "PAPER_CONFIG", "VAL_FRACTION", "HybridModel"]
+
 
 class HybridModel(RefitGuardMixin, HybridParams):
     __doc__ = ("""Hybrid physics + residual-network predictor of trip energy and final SoC.
@@ -73,44 +69,30 @@ class HybridModel(RefitGuardMixin, HybridParams):
 """
                + PARAMETERS_DOC + """    Attributes
     ----------
-    net_ : EnsembleMLP
-        The fitted network (eval mode).
-    feature_names_ : tuple of str
-    feature_mean_, feature_std_ : numpy.ndarray, shape (n_features,)
-        Standardisation of the inputs, in the units of the features.
-    target_mean_, target_std_ : float, kWh
-        Standardisation of the network target (the residual, kWh).
-    n_features_in_ : int
-    n_parameters_ : int
-        Trainable parameters per member (3,393 for the paper's network on
-        the 11 listed inputs; 3,329 with 10).
-    history_ : dict
-        Per-epoch ``train_loss``/``val_loss`` (n_epochs, n_members),
-        ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
+    physics_ : PhysicsStage
+        Vehicle, physics posterior and discrepancy stage
+        (:class:`~hybridev.learning.physics_stage.PhysicsStage`); its state is also
+        ``posterior_`` (None without ``calibrate_physics``), ``discrepancy_`` and
+        ``heater_kind_`` (learned when ``vehicle`` has ``heater_kind="auto"``, the
+        default of ``VehicleParams.from_coastdown``; else None).
+    learner_ : ResidualLearner
+        The residual ensemble (:class:`~hybridev.learning.residual.ResidualLearner`);
+        its state is also ``net_``, ``history_``, ``feature_names_``,
+        ``n_features_in_``, ``feature_mean_``, ``feature_std_``, ``target_mean_``,
+        ``target_std_`` and ``n_parameters_`` (3,393 per member for the paper's
+        network on the 11 listed inputs).
+    domain_ : TrainingDomain
+        Where the model was trained (:mod:`hybridev.learning.domain`).
+    calibrator_ : Calibrator
+        The conformal step (:class:`~hybridev.learning.calibrate.Calibrator`); its
+        state is also ``conformal_`` (None when ``conformal_fraction=0``),
+        ``cv_nets_``, ``cv_physics_``, ``mondrian_cut_km_`` and ``conformal_bins_``.
     fit_info_ : dict
-        Trip counts, seed, fit time, validation-set errors and
-        ``distance_km_range`` (shortest and longest fitting trip, km; past
-        them the residual is held, :mod:`hybridev.learning.physical`) and,
-        when the heater kind was learned, ``heater`` (kind, ``log_evidence``,
-        residual sums of squares; :mod:`hybridev.bayes.heater`).
-    heater_kind_ : {"ptc", "heat_pump"} or None
-        The heater kind learned from the fitting trips when ``vehicle`` has
-        ``heater_kind="auto"`` (the default of ``VehicleParams.from_coastdown``);
-        every prediction then uses it. ``None`` when the vehicle declares its heater.
-    posterior_ : PhysicsPosterior or None
-        Physics posterior (``calibrate_physics=True``).
-    discrepancy_ : TermDiscrepancy or None
-        Term re-weighting of the physics (``discrepancy=True`` with a posterior).
-    conformal_ : NormalizedConformal or None
-        Calibration residuals of the conformal step (``conformal_fraction > 0``).
-    physics_, learner_, domain_, calibrator_
-        The components (:meth:`components`; ``docs/architecture.md``): the
-        :class:`~hybridev.learning.physics_stage.PhysicsStage`, the
-        :class:`~hybridev.learning.residual.ResidualLearner`, the
-        :class:`~hybridev.learning.domain.TrainingDomain` and the
-        :class:`~hybridev.learning.calibrate.Calibrator`. The attributes above
-        (``net_``, ``posterior_``, ``conformal_``, ...) are their state, read
-        through the model.
+        Trip counts, seed, fit time, validation-set errors, ``distance_km_range``
+        (shortest and longest fitting trip, km; past them the residual is held,
+        :mod:`hybridev.learning.residual`), ``heater`` when the heater kind was
+        learned (:mod:`hybridev.bayes.heater`), ``trace_gap_rel`` when fitted on
+        logged traces (:mod:`hybridev.learning.ood`).
 
     Examples
     --------
@@ -130,21 +112,12 @@ class HybridModel(RefitGuardMixin, HybridParams):
     _fallback_to_physics = True
     _default_features = FEATURE_NAMES
 
-    net_ = Part("learner_")
-    history_ = Part("learner_")
-    feature_mean_ = Part("learner_")
-    feature_std_ = Part("learner_")
-    target_mean_ = Part("learner_")
-    target_std_ = Part("learner_")
-    n_parameters_ = Part("learner_")
-    posterior_ = Part("physics_")
-    discrepancy_ = Part("physics_")
-    heater_kind_ = Part("physics_")
-    conformal_ = Part("calibrator_")
-    cv_nets_ = Part("calibrator_", "fold_nets_")
-    cv_physics_ = Part("calibrator_", "fold_physics_")
-    mondrian_cut_km_ = Part("calibrator_", "cut_km_")
-    conformal_bins_ = Part("calibrator_", "bins_")
+    # the components' learned state under the model's documented names
+    (net_, history_, feature_mean_, feature_std_, target_mean_, target_std_,
+     n_parameters_) = (Part("learner_") for _ in range(7))
+    posterior_, discrepancy_, heater_kind_ = (Part("physics_") for _ in range(3))
+    conformal_, cv_nets_, cv_physics_, mondrian_cut_km_, conformal_bins_ = (
+        Part("calibrator_", a) for a in (None, "fold_nets_", "fold_physics_", "cut_km_", "bins_"))
 
     # -- components ----------------------------------------------------------------------
     @property
@@ -184,28 +157,13 @@ class HybridModel(RefitGuardMixin, HybridParams):
         return self.fitted()
 
     def _require_fitted(self) -> None:
-        if not self.fitted():
-            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call "
-                                 "fit(measured_trips) first (or load a fitted model)")
+        require_fitted(self)
 
     def _require_probabilistic(self, what: str) -> None:
-        name = type(self).__name__
-        if not self.fitted():
-            raise NotFittedError(
-                f"this {name} is not fitted yet: {what} needs the fitted network and its "
-                "calibration; call fit(measured_trips) first or load a fitted model "
-                "(predict() alone falls back to the physics)")
-        if not (int(self.n_members) > 1 or bool(self.heteroscedastic)
-                or self.physics_.posterior_ is not None):
-            raise ValueError(
-                f"this {name} has no predictive spread (n_members=1, heteroscedastic=False, "
-                "no physics posterior: the paper's point model), so it has no "
-                f"{what}; fit with n_members >= 2, heteroscedastic=True or "
-                "calibrate_physics=True (the defaults) for one")
+        require_probabilistic(self, what)
 
-    def _conformal_factor(self, level: float) -> float | None:
-        """Conformal quantile for ``level`` (None without a conformal step); checks ``level``."""
-        return self.calibrator_.quantile(level)
+    def _check_level(self, level) -> None:
+        check_level(self, level)
 
     def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
             timeseries=None, groups="auto",
@@ -263,27 +221,11 @@ class HybridModel(RefitGuardMixin, HybridParams):
         split = fitting.split_trips(self, good, table, groups, seed)
         for attr in ("physics_", "learner_", "domain_", "calibrator_"):
             self.__dict__.pop(attr, None)
-        rest = good.iloc[split.rest]
         # 1. physics: heater kind, posterior and discrepancy (calibration trips held out)
-        physics = new_physics(self)
-        heater = physics.select_heater(rest, traces, split.codes[split.rest])
-        physics.fit(rest, seed, traces)
-        if physics.posterior_ is not None:
-            warn_unphysical(physics.posterior_)
-        self.physics_ = physics
-        phys = physics.table(good, traces)
-        # 2. residual learner and training domain
-        learner = new_learner(self)
-        x = trip_features(phys, learner.feature_names)
-        e_meas = good["energy_kwh"].to_numpy(float)
-        e_phys = phys["energy_kwh_physics"].to_numpy(float)
-        scale = learner.target_scale(e_phys, good["distance_km"].to_numpy(float))
-        y = (e_meas - e_phys) / scale if self._residual else e_meas
-        xs, ys = learner.fit_scalers(x[split.train], y[split.train]).scaled(x, y)
-        self.domain_ = TrainingDomain.fit(phys, xs, traces=traces)
-        learner.fit(xs, ys, split.train, split.val, int(split.torch_ss.generate_state(1)[0]),
-                    progress)
-        self.learner_ = learner
+        self.physics_, heater = fitting.fit_physics(self, good, split, traces, seed)
+        # 2. residual learner and training domain on the physics of every trip
+        self.learner_, self.domain_, (xs, ys, e_meas, e_phys, scale) = fitting.fit_learner(
+            self, good, self.physics_.table(good, traces), split, traces, progress)
         d_fit = good["distance_km"].to_numpy(float)[split.rest]  # what the networks learn from
         self.fit_info_ = {"distance_km_range": [float(d_fit.min()), float(d_fit.max())]}
         # 3. calibrator: split conformal on the held-out trips, or CV+ folds
@@ -317,15 +259,11 @@ class HybridModel(RefitGuardMixin, HybridParams):
         pandas.DataFrame
             A copy of ``trips`` with :func:`hybridev.simulate`'s columns
             (``energy_kwh_physics``, ``soc_final_physics``, ``max_speed_kmh``,
-            ``kwh_per_km_physics``) plus ``energy_kwh_pred`` (kWh, the mean
-            over members) and ``soc_final_pred`` (``s0 - E/C`` clipped to [0, 1]).
-            A fitted model's energy is never below the physical floor and its
-            networks hold the residual outside the training distances
-            (:mod:`hybridev.learning.physical`).
-            With a physics posterior (``calibrate_physics=True``) the physics
-            columns are those of the posterior-median parameters. A fitted
-            model adds ``domain_score`` and ``in_domain``
-            (:mod:`hybridev.learning.domain`).
+            ``kwh_per_km_physics``; with a posterior, at its median) plus
+            ``energy_kwh_pred`` (kWh, the mean over members, never below the physical
+            floor, :mod:`hybridev.learning.physical`) and ``soc_final_pred`` (``s0 -
+            E/C`` clipped to [0, 1]); a fitted model adds ``domain_score`` and
+            ``in_domain`` (:mod:`hybridev.learning.domain`).
 
         Warns
         -----
@@ -352,19 +290,12 @@ class HybridModel(RefitGuardMixin, HybridParams):
 
         Parameters
         ----------
-        trips : pandas.DataFrame or MeasuredTrips
-            Trip table (``mode`` may be missing); a
-            :class:`~hybridev.data.logs.MeasuredTrips` brings its traces.
+        trips, seed, timeseries
+            As :meth:`predict_interval` (a pandas table or MeasuredTrips).
         level : float
-            Confidence level in (0, 1) whose conformal correction sets the
-            spread factor (see
-            :meth:`hybridev.learning.conformal.NormalizedConformal.spread_factor`).
-            Out-of-domain trips get the larger of that spread and their
-            out-of-domain spread (a per-trip factor).
-        seed : int
-            Seeds the choice of posterior draws.
-        timeseries : LoggedTraces or pandas.DataFrame, optional
-            Logged speed traces by ``trip_id`` (see :meth:`HybridModel.fit`).
+            Confidence level in (0, 1) whose conformal correction sets the spread
+            factor (:meth:`hybridev.learning.conformal.NormalizedConformal.spread_factor`);
+            out-of-domain trips get the larger of that and their out-of-domain spread.
 
         Returns
         -------
@@ -373,19 +304,12 @@ class HybridModel(RefitGuardMixin, HybridParams):
 
         Raises
         ------
-        sklearn.exceptions.NotFittedError
-            When the model is not fitted.
-        ValueError
-            On a bad ``level`` (or one too high for the calibration trips) or
-            a model without predictive spread.
-
-        Warns
-        -----
-        OutOfDomainWarning
-            Once, with the count, when some trips lie outside the training domain.
+        sklearn.exceptions.NotFittedError, ValueError
+            As :meth:`predict_interval` (which also warns the same).
         """
         self._require_probabilistic("predict_distribution")
         check_seed(seed)
+        self._check_level(level)  # before any work
         trips, traces = unpack_trips(trips, timeseries)
         return predictive_path(self, trips, traces, kind="distribution", level=level, seed=seed)
 
@@ -451,7 +375,7 @@ class HybridModel(RefitGuardMixin, HybridParams):
                                                                timeseries=timeseries)
         self._require_probabilistic("predict_interval")
         check_seed(seed)
-        self._conformal_factor(level)  # checks the level before any work
+        self._check_level(level)  # before any work
         trips, traces = unpack_trips(trips, timeseries)
         return predictive_path(self, trips, traces, kind="interval", level=level, seed=seed)
 
@@ -493,7 +417,3 @@ class HybridModel(RefitGuardMixin, HybridParams):
 
     def _set_extra_state(self, doc: dict, arrays: dict[str, np.ndarray]) -> None:
         """Restore :meth:`_extra_state`."""
-
-    def _restore(self, parts: dict, fit_info: dict) -> None:
-        """Set the components from their saved ``{name: (doc, arrays)}`` (:mod:`.persist`)."""
-        restore(self, parts, fit_info)

@@ -20,9 +20,10 @@ import math
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
+from hybridev.learning.conformal import binned_interval
 
-__all__ = ["TEMPERATURE_BANDS_C", "bin_names", "mondrian_bins", "mondrian_interval"]
+__all__ = ["TEMPERATURE_BANDS_C", "bin_names", "mondrian_bins", "mondrian_interval",
+           "mondrian_plan"]
 
 TEMPERATURE_BANDS_C = (5.0, 20.0)
 """Edges of the cold / mild / warm temperature bands, degC."""
@@ -46,6 +47,30 @@ def bin_names() -> list[str]:
     """Readable names of the six bins, by bin index."""
     return [f"{t}, {d}" for t in ("cold <5 C", "mild 5-20 C", "warm >=20 C")
             for d in ("short", "long")]
+
+
+def mondrian_plan(cal_bins: np.ndarray, test_bins: np.ndarray, level: float
+                  ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The bins calibrated on their own at ``level``: ``[(rows, scores), ...]``.
+
+    ``rows`` (n_trips,) bool: the test trips of the bin; ``scores`` (n_cal,) bool: its
+    calibration scores. Bins without enough scores (``ceil((n_b + 1) level) > n_b``)
+    are left out: their trips keep the pooled calibration.
+
+    Examples
+    --------
+    >>> plan = mondrian_plan(np.array([0] * 9 + [1] * 3), np.array([0, 1, 0]), 0.9)
+    >>> [(r.tolist(), int(s.sum())) for r, s in plan]
+    [([True, False, True], 9)]
+    """
+    plan = []
+    for b in np.unique(test_bins):
+        sel_cal = cal_bins == b
+        n_b = int(sel_cal.sum())
+        if n_b == 0 or math.ceil((n_b + 1) * level) > n_b:
+            continue
+        plan.append((test_bins == b, sel_cal))
+    return plan
 
 
 def mondrian_interval(cp, cal_bins: np.ndarray, test_bins: np.ndarray, level: float, *,
@@ -72,24 +97,5 @@ def mondrian_interval(cp, cal_bins: np.ndarray, test_bins: np.ndarray, level: fl
     used : numpy.ndarray of bool, shape (n_trips,)
         Where the per-bin interval applies.
     """
-    n = len(test_bins)
-    lo, hi = np.full(n, np.nan), np.full(n, np.nan)
-    used = np.zeros(n, dtype=bool)
-    for b in np.unique(test_bins):
-        sel_cal = cal_bins == b
-        n_b = int(sel_cal.sum())
-        if n_b == 0 or math.ceil((n_b + 1) * level) > n_b:
-            continue
-        rows = test_bins == b
-        if isinstance(cp, CVPlusConformal):
-            fold = cp.fold[sel_cal]
-            keep = np.unique(fold)
-            remap = np.searchsorted(keep, fold)
-            sub = CVPlusConformal(cp.residuals[sel_cal], remap)
-            lo[rows], hi[rows] = sub.cv_interval(fold_means[keep][:, rows],
-                                                 fold_stds[keep][:, rows], level)
-        else:
-            sub = NormalizedConformal(cp.residuals[sel_cal])
-            lo[rows], hi[rows] = sub.interval(mean[rows], std[rows], level)
-        used[rows] = True
-    return lo, hi, used
+    return binned_interval(cp, mondrian_plan(cal_bins, test_bins, level), level, mean=mean,
+                           std=std, fold_means=fold_means, fold_stds=fold_stds)

@@ -53,7 +53,6 @@ import numpy as np
 import pandas as pd
 from scipy.special import ndtri
 
-from hybridev.learning.domain import MISSING_INPUT_SCORE, TrainingDomain
 from hybridev.learning.steps import CalibratedInterval, DomainAssessment, RawPrediction
 
 __all__ = ["OutOfDomainSpread", "trace_gap"]
@@ -78,29 +77,29 @@ class OutOfDomainSpread:
     trace_gap_rel: float = 0.0
 
     def sd(self, assessment: DomainAssessment | None, table: pd.DataFrame, mu: np.ndarray,
-           sd: np.ndarray, var_draws: np.ndarray, *, dist=None, mode_means=None
-           ) -> np.ndarray:
+           sd: np.ndarray, var_draws: np.ndarray, *, excess_var=None, dist=None,
+           mode_means=None) -> np.ndarray:
         """``sd_ood`` (kWh) per trip: the model's own ``sd`` in the domain.
 
-        ``var_draws`` (n_trips,): the variance of the physics draws; ``dist``: the raw
-        distribution behind ``mu`` and ``sd`` (its
-        :meth:`~hybridev.learning.predictive.EnergyDistribution.excess_var` gives the
-        variance beyond the draws'; without it ``max(sd^2 - var_draws, 0)``, which loses
-        digits when the draws dominate). ``mode_means``: for the trips lacking a
-        trained-with mode, their point energies under the three modes (3, n_no_mode),
-        or a callable giving them from those trips' table.
+        ``var_draws`` (n_trips,): the variance of the physics draws; ``excess_var``: the
+        predictive variance beyond the draws' (or ``dist``, the raw distribution, whose
+        :meth:`~hybridev.learning.predictive.EnergyDistribution.excess_var` gives it;
+        with neither ``max(sd^2 - var_draws, 0)``, which loses digits when the draws
+        dominate). ``mode_means``: for the trips lacking a trained-with mode, their point
+        energies under the three modes (3, n_no_mode), or a callable giving them from
+        those trips' table.
         """
         if assessment is None or assessment.in_domain.all():
             return sd
         a = assessment
-        gap = np.where(a.no_trace, np.maximum(a.gap, MISSING_INPUT_SCORE), a.gap)
+        gap = a.ood_gap
         e_p = table["energy_kwh_physics"].to_numpy(float)
         # the posterior draws' spread as it is; the rest (noise, network) inflated
-        var_rest = (dist.excess_var() if dist is not None
-                    else np.maximum(sd**2 - var_draws, 0.0))
-        rest = (self.noise_rel * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
-        infl = TrainingDomain.inflation(gap)
-        sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
+        if excess_var is None:
+            excess_var = (dist.excess_var() if dist is not None
+                          else np.maximum(sd**2 - var_draws, 0.0))
+        rest = (self.noise_rel * e_p) ** 2 + (mu - e_p) ** 2 + excess_var
+        sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + a.inflation**2 * rest), sd)
         no_trace = a.no_trace
         if self.trace_gap_rel > 0 and no_trace.any():  # what the missing trace alone can change
             sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2
@@ -115,18 +114,21 @@ class OutOfDomainSpread:
             sd_ood[no_mode] = np.sqrt(sd_ood[no_mode] ** 2 + between)
         return sd_ood
 
+    def _raw_sd(self, assessment, raw: RawPrediction) -> tuple[np.ndarray, np.ndarray]:
+        ok = (np.ones(len(raw.mean), dtype=bool) if assessment is None
+              else assessment.in_domain)
+        return ok, self.sd(assessment, raw.table, raw.mean, raw.std, raw.var_draws,
+                           excess_var=raw.excess_var, mode_means=raw.mode_means)
+
     def widen(self, assessment: DomainAssessment | None, raw: RawPrediction,
               cal: CalibratedInterval, level: float) -> tuple[CalibratedInterval, np.ndarray]:
-        """Intervals of out-of-domain trips widened to ``mu +- z sd_ood``; and ``confidence``.
+        """Step 6: intervals of out-of-domain trips widened to ``mu +- z sd_ood``.
 
-        Returns the interval (never narrower than ``cal``'s) and the predictive
-        standard deviation per trip (kWh, ``sd_ood`` out of the domain).
+        Returns the interval (never narrower than ``cal``'s) and ``confidence``, the
+        predictive standard deviation per trip (kWh, ``sd_ood`` out of the domain).
         """
-        dist, mu, sd = raw.dist, cal.mean, cal.std
-        ok = (np.ones(dist.n_trips, dtype=bool) if assessment is None
-              else assessment.in_domain)
-        sd_ood = self.sd(assessment, raw.table, mu, sd, dist.physics_draws_kwh.var(axis=0),
-                         dist=dist, mode_means=raw.mode_means)
+        mu, sd = cal.mean, cal.std
+        ok, sd_ood = self._raw_sd(assessment, raw)
         z2, z1 = float(ndtri(0.5 + level / 2.0)), float(ndtri(level))
         lo = np.where(ok, cal.lo, np.minimum(cal.lo, mu - z2 * sd_ood))
         hi = np.where(ok, cal.hi, np.maximum(cal.hi, mu + z2 * sd_ood))
@@ -137,18 +139,13 @@ class OutOfDomainSpread:
 
     def spread_factor(self, assessment: DomainAssessment | None, raw: RawPrediction,
                       factor: float):
-        """Per-trip spread factor of :meth:`HybridModel.predict_distribution`.
+        """Step 6 of ``predict_distribution``: the per-trip spread factor.
 
         ``factor`` in the domain, at least ``sd_ood / sd`` out of it; a number when
         every trip has ``factor``.
         """
-        dist = raw.dist
-        mu, sd_raw = dist.mean(), dist.std()
-        ok = (np.ones(dist.n_trips, dtype=bool) if assessment is None
-              else assessment.in_domain)
-        sd_ood = self.sd(assessment, raw.table, mu, sd_raw, dist.physics_draws_kwh.var(axis=0),
-                         dist=dist, mode_means=raw.mode_means)
-        sd = np.maximum(sd_raw, 1e-12)
+        ok, sd_ood = self._raw_sd(assessment, raw)
+        sd = np.maximum(raw.std, 1e-12)
         per_trip = np.where(ok, factor, np.maximum(factor, sd_ood / sd))
         return factor if np.all(per_trip == factor) else per_trip
 

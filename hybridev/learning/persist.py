@@ -57,6 +57,7 @@ from hybridev.core.outputs import (
     read_manifest,
     sha256_file,
 )
+from hybridev.learning.components import restore
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["ARRAYS_FILE", "DOC_FILE", "FORMAT_NAME", "FORMAT_VERSION", "MAX_ARRAYS",
@@ -362,7 +363,7 @@ def load_model(cls, path: str | os.PathLike):
             comps = doc["components"]
             parts = {c: (comps.get(c, {}), {k[len(c) + 1:]: v for k, v in arrays.items()
                                             if k.startswith(c + ".")}) for c in COMPONENTS}
-            model._restore(parts, dict(doc["fit_info"]))
+            restore(model, parts, dict(doc["fit_info"]))
         model._set_extra_state(doc.get("extra", {}), {
             k[len("extra."):]: v for k, v in arrays.items() if k.startswith("extra.")})
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError,

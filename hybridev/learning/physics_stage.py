@@ -34,7 +34,8 @@ from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.learning.features import MODE_NAMES, normalize_modes, physics_modes
 from hybridev.learning.inputs import validate_prediction_trips
-from hybridev.learning.steps import PhysicsDraws
+from hybridev.learning.residual import residual_scale
+from hybridev.learning.steps import ARRAY_COLUMNS, PhysicsDraws, table_columns
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.stats_build import trip_stats
@@ -46,32 +47,8 @@ __all__ = ["ARRAY_COLUMNS", "KEEP_POSTERIOR_DRAWS", "PhysicsStage", "residual_sc
 KEEP_POSTERIOR_DRAWS = 500
 """Posterior draws a fitted model keeps (evenly spaced over the thinned chain)."""
 
-_MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
-
-ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",
-                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics")
-"""Float columns of a physics table that the point prediction reads."""
-
-
 _PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
                     "kwh_per_km_physics")
-
-
-def table_columns(table: pd.DataFrame) -> dict[str, np.ndarray]:
-    """The :data:`ARRAY_COLUMNS` of ``table`` present (float) and ``mode`` (object)."""
-    present = set(table.columns)
-    cols = {c: table[c].to_numpy(float) for c in ARRAY_COLUMNS if c in present}
-    if "mode" in present:
-        cols["mode"] = table["mode"].to_numpy(object)
-    return cols
-
-
-def residual_scale(energy_physics_kwh, distance_km, relative: bool) -> np.ndarray:
-    """Scale of the residual target: 1 (absolute) or ``max(|E_p|, 0.05 kWh/km d)``, kWh."""
-    e = np.asarray(energy_physics_kwh, dtype=float)
-    if not relative:
-        return np.ones_like(e)
-    return np.maximum(np.abs(e), _MIN_SCALE_KWH_PER_KM * np.asarray(distance_km, float))
 
 
 class PhysicsStage:

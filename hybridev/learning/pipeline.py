@@ -25,24 +25,92 @@ the next a named value (:mod:`hybridev.learning.steps`)::
 
 ``predict`` stops after step 4 (the mean, floored, in step 7); ``predict_distribution``
 after step 6 (a per-trip spread factor). No step calls back into an earlier one.
+
+**The distribution.** For a trip with features ``x``, posterior draws ``theta_d``
+(d = 1..D) and members ``m`` (m = 1..M)::
+
+    E = E_p(theta_d) - mean_d E_p(theta_d) + E_p(theta_hat) + dE_m(x) + sigma_m(x) z
+
+where ``theta_hat`` is the posterior median (the physics the networks were trained
+against). :class:`~hybridev.learning.predictive.EnergyDistribution` holds the pieces;
+its mean is the point prediction ``energy_kwh_pred``. Trips without a ``mode`` get the
+posterior-weighted (``missing_mode="infer"``) or equal-weight mixture of the three
+profiles' physics; when every training trip had a mode, such trips are out of the
+domain and the spread between the three modes' predictions is added (step 6).
+
+**The intervals.** Normalised conformal intervals of energy (step 5): split conformal
+``mu +- q s`` with ``mu``, ``s`` the distribution's mean and spread, or CV+ from the
+fold ensembles (widened to hold ``mu``); out-of-domain trips get the wider ``mu +- z
+s_ood`` (:mod:`hybridev.learning.ood`). Final SoC ``s0 - E / C`` (clipped to [0, 1]) is
+monotone in energy, so the SoC interval is the image of the energy interval, except for
+trips that may empty the battery (upper energy at or above ``s0 C``): their SoC has a
+point mass at 0 and the interval is the one-sided ``[0, s0 - E_lo' / C]`` with the
+one-sided conformal lower bound ``E_lo'`` at the same level. Energy bounds are floored
+like the point prediction (at ``min(E_p, 0)`` and the physical floor), the one-sided
+bound is capped at the point prediction (so every interval holds it).
+
+``confidence`` is the predictive standard deviation ``s`` of the trip energy in kWh
+(members' noise and disagreement, the physics posterior spread; ``s_ood`` out of the
+domain); ``confidence_rel`` divides it by ``max(|E|, 0.05 kWh/km d)``: scale-free, it
+ranks the relative error and rises as trips leave the domain. The conformal factor
+multiplies all trips alike, so it is not applied to them.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
+from hybridev.learning.components import new_physics
+from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
 from hybridev.learning.physical import interval_columns, point_columns
-from hybridev.learning.physics_stage import table_columns
-from hybridev.learning.predictive import EnergyDistribution, build_distribution
-from hybridev.learning.steps import RawPrediction
+from hybridev.learning.predictive import EnergyDistribution, build_distribution, raw_prediction
 from hybridev.physics.trips import append_columns
 
 __all__ = ["ood_sd", "physics_draws", "predictive_path", "raw_distributions"]
 
 KINDS = ("point", "interval", "distribution")
+
+
+@dataclass(frozen=True)
+class _Parts:
+    """What the path reads from the model, once, before the first step."""
+
+    stage: object  # PhysicsStage (fitted, or of the current settings)
+    vehicle: object  # its VehicleParams
+    learner: object  # ResidualLearner or None (unfitted)
+    domain: object  # TrainingDomain or None
+    calibrator: object  # Calibrator or None
+    n_draws: int
+    distance_range: list | None
+    noise_rel: float
+    trace_gap_rel: float
+
+    @classmethod
+    def of(cls, model) -> _Parts:
+        state = model.__dict__  # the components themselves: no call back into the model
+        stage = state.get("physics_") or new_physics(model)
+        fitted = hasattr(state.get("learner_"), "net_")
+        info = state.get("fit_info_") or {}
+        post = stage.posterior_
+        return cls(stage, stage.vehicle(), state["learner_"] if fitted else None,
+                   state.get("domain_") if fitted else None,
+                   state.get("calibrator_"), int(model.n_posterior_draws),
+                   info.get("distance_km_range"),
+                   float(np.median(post.noise_rel)) if post is not None else 0.0,
+                   float(info.get("trace_gap_rel", 0.0)))
+
+    def folds(self) -> tuple[list, list]:
+        """The CV+ fold ensembles and their physics (None: the model's), or ``([], [])``."""
+        cal = self.calibrator
+        if cal is None or not isinstance(cal.conformal_, CVPlusConformal):
+            return [], []
+        nets = list(cal.fold_nets_ or [])
+        return nets, list(cal.fold_physics_ or [None] * len(nets))
 
 
 def _entries(physics: list) -> tuple[list, list[int]]:
@@ -56,6 +124,31 @@ def _entries(physics: list) -> tuple[list, list[int]]:
     return unique, index
 
 
+def _raw(parts: _Parts, trips: pd.DataFrame, traces=None, *, seed: int = 0, nets=(None,),
+         physics=None, modes: bool = False, warn: bool = False):
+    """Steps 1-4: ``(dists, draws, assessment, mode_means)`` (see :func:`raw_distributions`)."""
+    stage, learner, dom = parts.stage, parts.learner, parts.domain
+    unique, index = _entries([None] * len(nets) if physics is None else list(physics))
+    modes = modes and dom is not None and dom.needs_mode
+    draws = stage.transform(trips, traces, n_draws=parts.n_draws, seed=seed,  # 1 physics
+                            physics=unique, modes=modes)
+    fade = stage.discrepancy_ is not None and dom is not None
+    assessment = (None if dom is None  # 2 domain
+                  else dom.assess(draws.table, traces, fade=fade, warn=warn, stacklevel=7))
+    draws = draws.faded(assessment.fade if fade else None,
+                        assessment.mode_fade if fade else None)
+    physics_draws = [draws.draws(e) for e in range(len(draws.tables))]
+    moments = learner.predict_moments(draws.tables, index, list(nets),  # 3 residual
+                                      parts.distance_range, dom)
+    mode_means = (np.stack([learner.point(draws.modes[m].tables[0], dom) for m in MODE_NAMES])
+                  if draws.modes else None)
+    dists = [build_distribution(physics_draws[e],  # 4 distribution
+                                draws.tables[e]["energy_kwh_physics"].to_numpy(float),
+                                mean, var, residual=learner.residual)
+             for (mean, var), e in zip(moments, index, strict=True)]
+    return dists, draws, assessment, mode_means
+
+
 def raw_distributions(model, trips: pd.DataFrame, traces=None, *, seed: int = 0,
                       nets=(None,), physics=None, modes: bool = False, warn: bool = False
                       ) -> tuple[list[EnergyDistribution], object, object, np.ndarray | None]:
@@ -64,51 +157,31 @@ def raw_distributions(model, trips: pd.DataFrame, traces=None, *, seed: int = 0,
     ``None`` in ``nets`` is the fitted ensemble; the others are CV+ fold ensembles, each
     with its ``(posterior, discrepancy)`` in ``physics`` (``None``: the model's). The
     physics of entries sharing one is computed once. Returns the distributions, the
-    faded :class:`~hybridev.learning.steps.PhysicsDraws` and the
+    faded :class:`~hybridev.learning.steps.PhysicsDraws`, the
     :class:`~hybridev.learning.steps.DomainAssessment` (None without a domain) and, with
     ``modes``, the point energies of the trips lacking a trained-with mode under each
-    of the three modes (3, n_no_mode; else None).
+    of the three modes (3, n_no_mode; else None). ``warn``: warn when trips are out of
+    the domain.
     """
-    learner, dom = model.learner_, getattr(model, "domain_", None)
-    unique, index = _entries([None] * len(nets) if physics is None else list(physics))
-    stage = model.physics_stage()
-    modes = modes and dom is not None and dom.needs_mode
-    draws = stage.transform(trips, traces, n_draws=int(model.n_posterior_draws), seed=seed,  # 1
-                            physics=unique, modes=modes)
-    fade = stage.discrepancy_ is not None
-    assessment = (None if dom is None else dom.assess(draws.table, traces, fade=fade,  # 2
-                                                     warn=warn, stacklevel=6))
-    if fade and dom is not None:
-        draws = draws.faded(assessment.fade, assessment.mode_fade)
-    else:
-        draws = draws.faded(None)
-    span = (getattr(model, "fit_info_", None) or {}).get("distance_km_range")
-    moments = learner.predict_moments(draws.tables, index, list(nets), span, dom)  # 3
-    dists = []
-    for (mean, var), e in zip(moments, index, strict=True):  # 4
-        table = draws.tables[e]
-        dists.append(build_distribution(draws.draws(e), table["energy_kwh_physics"]
-                                        .to_numpy(float), mean, var,
-                                        residual=learner.residual))
-    mode_means = (np.stack([learner.point(draws.modes[m].tables[0], dom) for m in MODE_NAMES])
-                  if draws.modes else None)
-    return dists, draws, assessment, mode_means
+    return _raw(_Parts.of(model), trips, traces, seed=seed, nets=nets, physics=physics,
+                modes=modes, warn=warn)
 
 
 def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "point",
                     level: float = 0.9, seed: int = 0):
-    """Predictions of ``trips`` by a fitted ``model`` (the steps of the module docstring).
+    """Predictions of ``trips`` by ``model`` (the steps of the module docstring).
 
     Parameters
     ----------
     model : HybridModel
-        Fitted (``kind="point"`` of an unfitted model: see ``HybridModel.predict``).
+        Fitted (``kind="point"`` of an unfitted model: the physics alone).
     trips : pandas.DataFrame
         Trip table (``mode`` may be missing).
     traces : LoggedTraces, optional
     kind : {"point", "interval", "distribution"}
     level : float in (0, 1)
-        Confidence level (interval, distribution).
+        Confidence level (interval, distribution), checked by the caller
+        (``HybridModel._check_level``).
     seed : int
         Seeds the choice of posterior draws (interval, distribution).
 
@@ -118,64 +191,47 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         ``predict``'s or ``predict_interval``'s table, or ``predict_distribution``'s
         distribution.
     """
+    if kind not in KINDS:
+        raise ValueError(f"kind={kind!r}; allowed: {list(KINDS)}")
+    parts = _Parts.of(model)
     if kind == "point":
-        return _point(model, trips, traces)
-    cal = model.calibrator_
+        return _point(parts, trips, traces)
+    nets, physics = parts.folds() if kind == "interval" else ([], [])
+    dists, draws, assessment, mode_means = _raw(  # steps 1-4
+        parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
+        modes=True, warn=True)
+    raw = raw_prediction(draws.tables[0], dists, mode_means)
+    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
     if kind == "distribution":
-        factor = cal.spread_factor(level)  # checks the level before any work
-        dists, draws, assessment, mode_means = raw_distributions(  # steps 1-4
-            model, trips, traces, seed=seed, modes=True, warn=True)
-        raw = RawPrediction(draws.tables[0], dists[0], [], mode_means)
-        ood = _ood(model)
-        per_trip = ood.spread_factor(assessment, raw, factor)  # steps 5-6
+        factor = parts.calibrator.spread_factor(level)  # 5 calibrator
         d = raw.dist
         return EnergyDistribution(d.physics_draws_kwh, d.residual_mean_kwh, d.residual_std_kwh,
-                                  spread_factor=per_trip)
-    cal.quantile(level)  # checks the level before any work
-    folds = cal.folds()
-    dists, draws, assessment, mode_means = raw_distributions(  # steps 1-4
-        model, trips, traces, seed=seed, nets=(None, *folds),
-        physics=(None, *cal.fold_physics()), modes=True, warn=True)
-    raw = RawPrediction(draws.tables[0], dists[0], dists[1:], mode_means)
-    n = raw.dist.n_trips
-    ok = np.ones(n, dtype=bool) if assessment is None else assessment.in_domain
-    calibrated = cal.calibrate(raw, level, ok)  # step 5
-    wide, confidence = _ood(model).widen(assessment, raw, calibrated, level)  # step 6
-    score = np.zeros(n) if assessment is None else assessment.score
-    return interval_columns(raw.table, wide, confidence, ok, score,  # step 7
-                            model._vehicle(), residual=model.learner_.residual)
+                                  spread_factor=ood.spread_factor(assessment, raw, factor))  # 6
+    ok = np.ones(len(raw.mean), dtype=bool) if assessment is None else assessment.in_domain
+    calibrated = parts.calibrator.calibrate(raw, level, ok)  # 5 calibrator
+    wide, confidence = ood.widen(assessment, raw, calibrated, level)  # 6 out-of-domain
+    score = np.zeros(len(ok)) if assessment is None else assessment.score
+    return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
+                            residual=parts.learner.residual)
 
 
-def _ood(model) -> OutOfDomainSpread:
-    post = model.physics_stage().posterior_
-    gap = float((getattr(model, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
-    return OutOfDomainSpread(noise_rel=float(np.median(post.noise_rel)) if post is not None
-                             else 0.0, trace_gap_rel=gap)
-
-
-def _point(model, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
+def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
     """The point path: steps 1-3, the mean of step 4 and the floor and SoC of step 7."""
-    stage = model.physics_stage()
-    draws = stage.transform(trips, traces)  # 1 (validates the trips)
-    dom = getattr(model, "domain_", None) if model.fitted() else None
+    stage, dom, learner, vehicle = parts.stage, parts.domain, parts.learner, parts.vehicle
+    draws = stage.transform(trips, traces)  # 1 physics (validates the trips)
     assessment = None
-    if dom is not None:  # 2
-        cols = draws.columns if draws.columns else None
-        assessment = dom.assess(draws.table, traces, columns=cols,
-                                fade=stage.discrepancy_ is not None, warn=True, stacklevel=5)
+    if dom is not None:  # 2 domain
+        assessment = dom.assess(draws.table, traces, columns=draws.columns or None,
+                                fade=stage.discrepancy_ is not None, warn=True, stacklevel=6)
     append = draws.append
     if draws.posterior:  # the table waits for the discrepancy's fade
         draws = draws.faded(None if assessment is None else assessment.fade)
-        cols = table_columns(draws.table)
-    else:
-        cols = draws.columns
+    cols = draws.point_columns()
     e_phys = cols["energy_kwh_physics"]
-    vehicle = stage.vehicle()
-    if model.fitted():
-        learner = model.learner_
-        span = (getattr(model, "fit_info_", None) or {}).get("distance_km_range")
-        energy = learner.point_of_columns(cols, len(e_phys), span, dom)  # 3-4
-        out = point_columns(cols, energy, vehicle)  # 7
+    if learner is not None:
+        energy = learner.point_of_columns(cols, len(e_phys), parts.distance_range,  # 3-4
+                                          dom)
+        out = point_columns(cols, energy, vehicle)  # 7 output
     else:
         out = point_columns(cols, e_phys, vehicle, floor=False)
     out = {**append, **out}
@@ -219,6 +275,7 @@ def ood_sd(model, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray, var_draws
         return np.stack([learner.point(physics_draws(model, sub.assign(mode=m), traces)[0],
                                        dom) for m in MODE_NAMES])
 
-    sd_ood = _ood(model).sd(assessment, table, mu, sd, var_draws, dist=dist,
-                            mode_means=mode_means)
+    parts = _Parts.of(model)
+    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
+    sd_ood = ood.sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
     return assessment.score, assessment.in_domain, sd_ood

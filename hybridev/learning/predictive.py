@@ -32,9 +32,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hybridev.learning.physical import soc_from_energy
+from hybridev.learning.steps import RawPrediction
 from hybridev.metrics.mixture import mixture_quantile
 
-__all__ = ["EnergyDistribution", "build_distribution", "soc_from_energy"]
+__all__ = ["EnergyDistribution", "build_distribution", "raw_prediction", "soc_from_energy"]
 
 _MIN_STD_KWH = 1e-9
 """Width given to zero-variance mixture components when computing quantiles, kWh."""
@@ -203,3 +204,16 @@ def build_distribution(physics_draws_kwh: np.ndarray, energy_physics_kwh: np.nda
         centred = physics_draws_kwh - physics_draws_kwh.mean(axis=0)
         centred += energy_physics_kwh
     return EnergyDistribution(centred, mean, std)
+
+
+def raw_prediction(table, dists: list[EnergyDistribution], mode_means=None) -> RawPrediction:
+    """The :class:`~hybridev.learning.steps.RawPrediction` of the fitted model's
+    distribution ``dists[0]`` and the CV+ folds' ``dists[1:]``, with the moments the
+    calibrator and the out-of-domain step read."""
+    dist, folds = dists[0], dists[1:]
+    return RawPrediction(
+        table=table, dist=dist, folds=folds, mode_means=mode_means, mean=dist.mean(),
+        std=dist.std(),
+        fold_means=np.stack([d.mean() for d in folds]) if folds else None,
+        fold_stds=(np.maximum(np.stack([d.std() for d in folds]), 1e-12) if folds else None),
+        var_draws=dist.physics_draws_kwh.var(axis=0), excess_var=dist.excess_var())

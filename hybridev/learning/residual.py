@@ -27,10 +27,9 @@ import torch
 
 from hybridev.learning.features import _feature_matrix, fit_standardizer, trip_features
 from hybridev.learning.nn import EnsembleMLP, n_parameters, train_ensemble
-from hybridev.learning.physics_stage import residual_scale
 
 __all__ = ["MIN_BLOCK_ROWS", "PREDICT_BLOCK_ROWS", "ResidualLearner", "hold_distances",
-           "hold_inputs"]
+           "hold_inputs", "residual_scale"]
 
 PREDICT_BLOCK_ROWS = 65_536
 MIN_BLOCK_ROWS = 32
@@ -39,6 +38,17 @@ kernels take another summation order for a handful of rows (seen below 13 rows w
 which changed a trip's prediction in the last float32 bit depending on how many trips
 were scored with it. Padded, a row's prediction does not depend on its batch (checked by
 ``tests/fleet/test_scoring.py``: pandas and dask partitions agree)."""
+
+
+_MIN_SCALE_KWH_PER_KM = 0.05  # floor of the relative-residual scale (no EV uses less)
+
+
+def residual_scale(energy_physics_kwh, distance_km, relative: bool) -> np.ndarray:
+    """Scale of the residual target: 1 (absolute) or ``max(|E_p|, 0.05 kWh/km d)``, kWh."""
+    e = np.asarray(energy_physics_kwh, dtype=float)
+    if not relative:
+        return np.ones_like(e)
+    return np.maximum(np.abs(e), _MIN_SCALE_KWH_PER_KM * np.asarray(distance_km, float))
 
 
 def hold_distances(distance_km, distance_range) -> np.ndarray:
@@ -88,7 +98,7 @@ class ResidualLearner:
     residual : bool
         Learn ``E* - E_p`` (True) or ``E*`` itself (``PureML``).
     relative : bool
-        Scale the residual by :func:`~hybridev.learning.physics_stage.residual_scale`.
+        Scale the residual by :func:`residual_scale`.
     **net : ensemble settings
         ``n_members, hidden, dropout, heteroscedastic, max_epochs, patience,
         batch_size, learning_rate, weight_decay, lr_decay, lr_decay_every`` of
@@ -97,10 +107,17 @@ class ResidualLearner:
     Attributes
     ----------
     net_ : EnsembleMLP
+        The fitted ensemble (eval mode).
     history_ : dict
+        Per-epoch ``train_loss``/``val_loss`` (n_epochs, n_members),
+        ``best_epoch``, ``stopped_epoch`` (n_members,), ``n_epochs``.
     feature_mean_, feature_std_ : numpy.ndarray, shape (n_features,)
+        Standardisation of the inputs, in the units of the features.
     target_mean_, target_std_ : float
+        Standardisation of the target (the scaled residual; ``PureML``: kWh).
     n_parameters_ : int
+        Trainable parameters per member (3,393 for the paper's network on the 11
+        listed inputs; 3,329 with 10).
     """
 
     def __init__(self, feature_names, *, residual: bool, relative: bool, **net) -> None:
@@ -163,7 +180,9 @@ class ResidualLearner:
     def standardized(self, x: np.ndarray, domain=None) -> np.ndarray:
         """Standardised float32 inputs of the raw feature matrix ``x``, held in ``domain``'s range."""
         xs = ((x - self.feature_mean_) / self.feature_std_).astype(np.float32)
-        return xs if domain is None else domain.clip_features(xs)
+        if domain is None:
+            return xs  # as TrainingDomain.clip_features: no extrapolation
+        return np.clip(xs, domain.feature_lo, domain.feature_hi).astype(xs.dtype)
 
     def features(self, physics_table: pd.DataFrame, domain=None) -> np.ndarray:
         """Standardised network inputs (n_trips, n_features) of a physics table."""

@@ -24,7 +24,21 @@ import pandas as pd
 
 from hybridev.physics.trips import append_columns, with_physics_columns
 
-__all__ = ["CalibratedInterval", "DomainAssessment", "PhysicsDraws", "RawPrediction"]
+__all__ = ["ARRAY_COLUMNS", "CalibratedInterval", "DomainAssessment", "PhysicsDraws",
+           "RawPrediction", "table_columns"]
+
+ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",
+                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics")
+"""Float columns of a physics table that the point prediction reads."""
+
+
+def table_columns(table: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The :data:`ARRAY_COLUMNS` of ``table`` present (float) and ``mode`` (object)."""
+    present = set(table.columns)
+    cols = {c: table[c].to_numpy(float) for c in ARRAY_COLUMNS if c in present}
+    if "mode" in present:
+        cols["mode"] = table["mode"].to_numpy(object)
+    return cols
 
 
 @dataclass
@@ -96,6 +110,10 @@ class PhysicsDraws:
         return replace(self, energies=energies, tables=tables, table=tables[0],
                        columns={}, modes=modes)
 
+    def point_columns(self) -> dict[str, np.ndarray]:
+        """The columns the point prediction reads, as arrays (after :meth:`faded`)."""
+        return self.columns or table_columns(self.table)
+
     def draws(self, entry: int = 0) -> np.ndarray:
         """Physics energies of posterior draws of ``entry`` (after :meth:`faded`), kWh."""
         if self.posterior:
@@ -121,6 +139,9 @@ class DomainAssessment:
     fade, mode_fade : numpy.ndarray or None
         The discrepancy's weight per trip (and per trip lacking a trained-with mode),
         None where it is 1 for every trip.
+    ood_gap, inflation : numpy.ndarray, shape (n_trips,)
+        The gap of the out-of-domain spread (a missing trained-with trace counts as
+        2) and its inflation (:meth:`TrainingDomain.inflation`).
     """
 
     score: np.ndarray
@@ -131,6 +152,8 @@ class DomainAssessment:
     reasons: dict
     fade: np.ndarray | None = None
     mode_fade: np.ndarray | None = None
+    ood_gap: np.ndarray | None = None
+    inflation: np.ndarray | None = None
 
 
 @dataclass
@@ -148,12 +171,26 @@ class RawPrediction:
     mode_means : numpy.ndarray, shape (3, n_no_mode), kWh, or None
         Point energies of the trips lacking a trained-with mode under each of the three
         modes (see :mod:`hybridev.learning.ood`).
+    mean, std : numpy.ndarray, shape (n_trips,), kWh
+        Mean and spread of ``dist``.
+    fold_means, fold_stds : numpy.ndarray, shape (n_folds, n_trips), kWh, or None
+        The same of each fold distribution (spreads at least 1e-12); None without CV+.
+    var_draws : numpy.ndarray, shape (n_trips,), kWh^2
+        Variance of the physics draws.
+    excess_var : numpy.ndarray, shape (n_trips,), kWh^2
+        ``dist``'s variance beyond the draws' (:meth:`EnergyDistribution.excess_var`).
     """
 
     table: pd.DataFrame
     dist: EnergyDistribution  # noqa: F821 (hybridev.learning.predictive)
     folds: list = field(default_factory=list)
     mode_means: np.ndarray | None = None
+    mean: np.ndarray | None = None
+    std: np.ndarray | None = None
+    fold_means: np.ndarray | None = None
+    fold_stds: np.ndarray | None = None
+    var_draws: np.ndarray | None = None
+    excess_var: np.ndarray | None = None
 
 
 @dataclass
