@@ -12,8 +12,8 @@ battery).
 calls) from the model's public predictive distribution, its conformal scores
 and the library's own pieces of the interval rule: the physical energy floor
 (:func:`hybridev.learning.physical.energy_floor_kwh`) and the out-of-domain
-spread (:mod:`hybridev.learning.ood`, ``_ood_sd``). Only the arithmetic that
-combines them is repeated here; :func:`check_against_predict_interval`
+spread (:mod:`hybridev.learning.ood`, :func:`hybridev.learning.pipeline.ood_sd`). Only
+the arithmetic that combines them is repeated here; :func:`check_against_predict_interval`
 asserts that the result equals ``predict_interval`` at the table levels (it
 fails when the library's rule changes). Models calibrated by CV+ or per
 Mondrian bin are refused (the study's fits use split conformal).

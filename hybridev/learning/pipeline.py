@@ -134,7 +134,7 @@ def _raw(parts: _Parts, trips: pd.DataFrame, traces=None, *, seed: int = 0, nets
                             physics=unique, modes=modes)
     fade = stage.discrepancy_ is not None and dom is not None
     assessment = (None if dom is None  # 2 domain
-                  else dom.assess(draws.table, traces, fade=fade, warn=warn, stacklevel=7))
+                  else dom.assess(draws.table, traces, fade=fade, warn=warn, stacklevel=6))
     draws = draws.faded(assessment.fade if fade else None,
                         assessment.mode_fade if fade else None)
     physics_draws = [draws.draws(e) for e in range(len(draws.tables))]
