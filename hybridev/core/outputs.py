@@ -58,8 +58,10 @@ their own already live beside it (:mod:`hybridev.core.manifest`,
 from __future__ import annotations
 
 import contextlib
-import json
+import errno
+import glob
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -73,10 +75,13 @@ from hybridev.core.manifest import (
     sha256_file,
     write_manifest,
 )
+from hybridev.core.merge import merge_into, recover_merge
 from hybridev.core.owned import REGISTER_FILE, is_owned, record_owned
+from hybridev.core.swap import fault, recover, replace_dir, undo_dir
 
 __all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "REGISTER_FILE", "TABLE_SUFFIXES", "atomic_file",
-           "atomic_replace", "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
+           "atomic_replace", "check_output", "is_hybridev_dir", "os_reason", "output_dir", "read_manifest",
+           "save_figure",
            "sha256_file", "write_table", "write_text"]
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -90,7 +95,41 @@ _FILE_LIKE_SUFFIXES = (".csv", ".parquet", ".pq", ".json", ".html", ".xlsx", ".p
                        ".svg", ".txt")
 
 def _resolve(p: str | os.PathLike) -> Path:
-    return Path(os.path.abspath(os.path.expanduser(os.fspath(p))))
+    """The path the OS will write: symlinks in the folders resolved (``ld/../x`` as the OS
+    reads it, not collapsed as text); the last component kept as named."""
+    raw = os.path.expanduser(os.fspath(p))
+    head, tail = os.path.split(raw.rstrip("/") or raw)
+    if tail in ("", ".", ".."):
+        return Path(os.path.realpath(raw))
+    return Path(os.path.realpath(head or ".")) / tail
+
+
+def _real_input(p: str | os.PathLike) -> Path:
+    """The real file or folder an input names (a glob: the folder it starts from)."""
+    raw = os.path.expanduser(os.fspath(p))
+    if glob.has_magic(raw):
+        parts = Path(raw).parts
+        keep = next(i for i, part in enumerate(parts) if glob.has_magic(part))
+        raw = os.path.join(*parts[:keep]) if keep else "."
+    return Path(os.path.realpath(raw))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Same inode (a hard link, a bind mount) or the same real path."""
+    if a == b:
+        return True
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except OSError:
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
+
+
+_SYSTEM_ROOTS = ("/dev", "/proc", "/sys")
+
+
+def _system_path(p: Path) -> bool:
+    return os.name == "posix" and any(p == Path(r) or _inside(p, Path(r)) for r in _SYSTEM_ROOTS)
 
 
 def _inside(child: Path, parent: Path) -> bool:
@@ -156,22 +195,49 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
         raise ValueError(f"{option}={path!r} must be a non-empty path")
     if "\0" in raw:
         raise ValueError(f"{option}={raw!r} contains a NUL character")
-    p = _resolve(raw)
     what = f"{option}={raw!r}"
+    try:
+        return _check(raw, what, kind, suffixes, inputs, names, legacy)
+    except OSError as exc:
+        raise ValueError(f"{what} cannot be used: {os_reason(exc)}") from exc
+
+
+def os_reason(exc: OSError) -> str:
+    """One line for an OS error: its text and what to do (name too long, permission, ...)."""
+    hints = {errno.ENAMETOOLONG: "shorten the name",
+             errno.EACCES: "check the permissions of its folders",
+             errno.EPERM: "check the permissions of its folders",
+             errno.EROFS: "the file system is read-only: choose another place",
+             errno.ENOSPC: "the disk is full: free space or choose another place",
+             errno.EDQUOT: "the disk quota is exceeded: free space or choose another place",
+             errno.ELOOP: "a symbolic link loops",
+             errno.ENOTDIR: "a part of the path is not a folder"}
+    text = exc.strerror or str(exc)
+    hint = hints.get(exc.errno)
+    return f"{text} ({hint})" if hint else text
+
+
+def _check(raw: str, what: str, kind: str, suffixes, inputs, names, legacy) -> Path:
+    p = _resolve(raw)
     rp = Path(os.path.realpath(p))
+    if _system_path(rp) or _system_path(p):
+        raise ValueError(f"{what} lies under {', '.join(_SYSTEM_ROOTS)}: hybridev writes "
+                         "regular files only; choose a path in your own folders")
     for inp in inputs:
         if inp is None:
             continue
-        q = Path(os.path.realpath(_resolve(inp)))
-        same = q == rp or (q.exists() and p.exists() and os.path.samefile(q, p))
-        if same:
-            raise ValueError(f"{what} is also an input of this run; hybridev never writes "
-                             "over its input: choose another path")
+        q = _real_input(inp)
+        if _same_file(q, rp):
+            raise ValueError(f"{what} is also an input of this run ({str(inp)!r}); hybridev "
+                             "never writes over its input: choose another path")
         if kind != "file" and _inside(q, rp):
             raise ValueError(f"{what} holds the input {str(inp)!r}; choose another path")
         if q.is_dir() and _inside(rp, q):
-            raise ValueError(f"{what} lies inside the input folder {str(inp)!r}; choose "
-                             "another path")
+            raise ValueError(f"{what} lies inside the input folder {str(inp)!r} (the next "
+                             "run would read it back as input); choose another path")
+    if kind == "merge_dir":
+        recover_merge(p)
+    recover(p, names=(REGISTER_FILE[1:],) if kind == "file" else ())
     if kind == "file":
         if raw.endswith(("/", os.sep)) or p.is_dir():
             raise ValueError(f"{what} is a directory; give a file name")
@@ -180,7 +246,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
             if p.suffix.lower() not in allowed:
                 raise ValueError(f"{what} must end in one of {allowed}; got "
                                  f"{p.suffix or 'no extension'!r}")
-        if os.path.lexists(p) and (not p.is_file() or p.is_symlink()):
+        if os.path.lexists(p) and (not stat.S_ISREG(os.lstat(p).st_mode)):
             raise ValueError(f"{what} exists and is not a regular file")
         if os.path.lexists(p) and not is_owned(p):
             raise ValueError(_foreign_file(what))
@@ -204,21 +270,25 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
             bad = foreign_files(p, legacy)
             if bad:
                 raise ValueError(
-                    f"{what} is an existing folder with files hybridev did not write there "
-                    f"(e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
+                    f"{what} is an existing folder with files hybridev did not write there, or "
+                    f"changed since (e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
                     "give a new folder name")
         if p.is_dir() and kind == "merge_dir":
             doc = read_manifest(p)
             old = doc is None and legacy is not None and legacy(p)
-            listed = set(names) if old else set((doc or {"files": {}})["files"])
+            listed = dict.fromkeys(names, "") if old else dict((doc or {"files": {}})["files"])
             for name in names:
                 q = p / name
                 if not os.path.lexists(q):
                     continue
-                ours = name in listed and (not q.is_dir() or old or not foreign_files(q))
+                if q.is_dir() and not q.is_symlink():
+                    ours = name in listed and (old or not foreign_files(q))
+                else:  # a file: unchanged since hybridev wrote it
+                    ours = name in listed and (old or (stat.S_ISREG(os.lstat(q).st_mode)
+                                                       and listed[name] == sha256_file(q)))
                 if not ours:
                     raise ValueError(f"{what}: {str(q)!r} exists and was not written there by "
-                                     "hybridev; move it away or choose another folder")
+                                     "hybridev (or was changed since); move it away or choose another folder")
     anc = p.parent
     while not os.path.lexists(anc) and anc != anc.parent:
         anc = anc.parent
@@ -285,7 +355,8 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     path = _resolve(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
+                                   dir=path.parent)
         os.close(fd)
         os.chmod(tmp, 0o644)  # mkstemp makes it private; the result is an ordinary file
     except OSError as exc:
@@ -294,13 +365,19 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     with guard(lambda: remove_path(tmp)):
         try:
             yield tmp
+            fault("file.written")
             if register and os.path.lexists(path) and not is_owned(path):
                 raise ValueError(_foreign_file(f"{option}={str(path)!r}"))
+            if register:  # the register accepts both versions while the file is replaced
+                record_owned(path, pending=tmp)
+                fault("file.pending")
             os.replace(tmp, path)
+            fault("file.replaced")
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
     if register:
         record_owned(path)
+        fault("file.done")
 
 
 def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
@@ -346,7 +423,8 @@ def save_figure(fig, path: str | os.PathLike, *, option: str = "--plot", **kwarg
 @contextlib.contextmanager
 def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "dir",
                manifest: dict | None = None, inputs: Iterable = (),
-               legacy: Callable[[Path], bool] | None = None) -> Iterator[Path]:
+               legacy: Callable[[Path], bool] | None = None,
+               names: Iterable[str] = ()) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``path`` on success, with a manifest.
 
     ``kind="model_dir"`` or ``"dir"``: ``path`` is replaced as a whole (allowed
@@ -369,83 +447,38 @@ def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "d
     ['_hybridev-manifest.json', 'x.txt']
     """
     info = {"kind": kind, **(manifest or {})}
+    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy,
+                          names=names)
     if kind == "merge_dir":
-        target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
-        yield from _merge(target, option, info, legacy)
+        def recheck(entries: list[str]) -> None:
+            check_output(target, option=option, kind=kind, names=entries, legacy=legacy)
+
+        try:
+            yield from merge_into(target, info, recheck)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
         return
-    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp",
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
                                     dir=target.parent))
         tmp.chmod(0o755)
     except OSError as exc:
         raise _could_not(option, path, exc) from exc
-    old = target.with_name(f".{target.name}.{os.getpid()}.old")
-    state = {"moved_old": False}
+    state: dict = {"old": None}
 
-    def cleanup() -> None:
-        if state["moved_old"] and not os.path.lexists(target) and old.exists():
-            os.replace(old, target)  # interrupted mid-swap: put the previous folder back
-        elif state["moved_old"]:
-            remove_path(old)
-        remove_path(tmp)
-
-    with guard(cleanup):
+    with guard(lambda: undo_dir(tmp, target, state)):
         try:
             yield tmp
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
         try:
+            fault("dir.written")
             write_manifest(tmp, info)
+            fault("dir.manifest")
             check_output(target, option=option, kind=kind, legacy=legacy)  # still replaceable
-            if target.exists():
-                remove_path(old)
-                os.replace(target, old)
-                state["moved_old"] = True
-            os.replace(tmp, target)
+            replace_dir(tmp, target, state)
+            undo_dir(tmp, target, state)  # removes the old folder
+            fault("dir.done")
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
-
-
-def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
-    created = not os.path.lexists(target)
-    try:
-        target.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".hybridev.", suffix=".tmp", dir=target))
-        tmp.chmod(0o755)
-    except OSError as exc:
-        raise _could_not(option, target, exc) from exc
-
-    def cleanup() -> None:
-        remove_path(tmp)
-        if created and not (target / MANIFEST_FILE).exists():
-            with contextlib.suppress(OSError):
-                target.rmdir()  # only if still empty
-
-    with guard(cleanup):
-        try:
-            yield tmp
-        except OSError as exc:
-            raise _could_not(option, target, exc) from exc
-        names = sorted(p.name for p in tmp.iterdir())
-        check_output(target, option=option, kind="merge_dir", names=names, legacy=legacy)
-        old_doc = read_manifest(target) or {"files": {}}
-        try:
-            for name in names:
-                src, dst = tmp / name, target / name
-                if src.is_dir():
-                    if dst.exists():
-                        remove_path(dst)
-                    os.replace(src, dst)
-                else:
-                    os.replace(src, dst)
-            keep = {k: v for k, v in old_doc["files"].items() if os.path.lexists(target / k)}
-            files = dict(keep)
-            for name in names:
-                files[name] = "folder" if (target / name).is_dir() else sha256_file(target / name)
-            doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
-            with atomic_replace(target / MANIFEST_FILE, option) as mtmp:
-                mtmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise _could_not(option, target, exc) from exc

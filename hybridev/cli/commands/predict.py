@@ -63,7 +63,11 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.core.plugins import entry_point, is_dataset
     from hybridev.learning.model import HybridModel
 
+    inputs = [args.model, args.trips, args.timeseries, getattr(args, "columns_file", None)]
     if is_dataset(args.trips):  # a glob or folder: dask (hybridev.fleet.cli.run_predict)
+        # the output folder may not be, hold or lie inside an input (the next run would
+        # read its own predictions back as trips)
+        check_output(args.out, kind="dir", inputs=inputs)
         return entry_point("cli.predict")(args)
     for opt in ("scheduler", "workers"):
         if getattr(args, opt, None) is not None:
@@ -71,9 +75,7 @@ def run(args: argparse.Namespace) -> int:
                              f"'trips/*.parquet' or a folder); got the single file {args.trips!r}")
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
-    check_output(args.out, suffixes=TABLE_SUFFIXES,
-                 inputs=[args.model, args.trips, args.timeseries,
-                         getattr(args, "columns_file", None)])
+    check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=inputs)
     model = model_with_vehicle(HybridModel.load(args.model), args)
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)
