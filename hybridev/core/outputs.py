@@ -355,6 +355,7 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     path = _resolve(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
+        recover(path, names=(REGISTER_FILE[1:],))  # leftovers of a crashed earlier run
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
                                    dir=path.parent)
         os.close(fd)
