@@ -61,7 +61,6 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.core.fileio import write_table
     from hybridev.core.outputs import TABLE_SUFFIXES, check_output
     from hybridev.core.plugins import entry_point, is_dataset
-    from hybridev.learning.model import HybridModel
 
     inputs = [args.model, args.trips, args.timeseries, getattr(args, "columns_file", None)]
     if is_dataset(args.trips):  # a glob or folder: dask (hybridev.fleet.cli.run_predict)
@@ -76,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
     check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=inputs)
+    from hybridev.learning.model import HybridModel  # torch: after the checks
+
     model = model_with_vehicle(HybridModel.load(args.model), args)
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)
