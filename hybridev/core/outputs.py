@@ -35,7 +35,8 @@ suffixes=..., inputs=[...], names=[...]) -> Path``
 ``atomic_replace(path, option=...)``
     The same without the ownership rule, for files inside folder outputs and
     the workflow scripts' own committed outputs.
-``write_table(df, path, option=...)``, ``write_text(text, path, option=...)``,
+``write_table(df, path, option=...)`` (CSV text cells that a spreadsheet would run
+as a formula get a leading ``'``: :func:`neutralise_formulas`), ``write_text(text, path, option=...)``,
 ``save_figure(fig, path, option=...)``
     One-call atomic writers (a failed write raises ``ValueError`` naming the option).
 ``output_dir(path, option=..., kind=..., manifest=None)``
@@ -80,7 +81,8 @@ from hybridev.core.owned import REGISTER_FILE, is_owned, record_owned
 from hybridev.core.swap import fault, recover, replace_dir, undo_dir
 
 __all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "REGISTER_FILE", "TABLE_SUFFIXES", "atomic_file",
-           "atomic_replace", "check_output", "is_hybridev_dir", "os_reason", "output_dir", "read_manifest",
+           "atomic_replace", "check_output", "is_hybridev_dir", "neutralise_formulas", "os_reason",
+           "output_dir", "read_manifest",
            "save_figure",
            "sha256_file", "write_table", "write_text"]
 
@@ -396,7 +398,41 @@ def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
         if Path(path).suffix.lower() in (".parquet", ".pq"):
             df.to_parquet(tmp, index=False)
         else:
-            df.to_csv(tmp, index=False)
+            neutralise_formulas(df).to_csv(tmp, index=False)
+
+
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def _defuse(v):
+    if not isinstance(v, str) or not v.startswith(_FORMULA_START):
+        return v
+    try:
+        float(v)
+        return v  # a number written as text ("-5") is not a formula
+    except ValueError:
+        return "'" + v
+
+
+def neutralise_formulas(df):
+    """Text cells a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab or
+    carriage return first, and not a number) get a leading ``'``; numbers are untouched.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> neutralise_formulas(pd.DataFrame({"id": ["=1+2", "-5", "a"], "x": [-1.0, 2, 3]}))["id"].tolist()
+    ["'=1+2", '-5', 'a']
+    """
+    text = [c for c in df.columns
+            if df[c].dtype == object or str(df[c].dtype) in ("string", "str")]
+    if not text:
+        return df
+    out = df.copy(deep=False)
+    for c in text:
+        out[c] = df[c].map(_defuse)
+    renamed = {c: _defuse(c) for c in out.columns if isinstance(c, str)}
+    return out.rename(columns=renamed)
 
 
 def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:

@@ -20,6 +20,9 @@ import argparse
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
+    apply_columns,
+    column_mapping,
+    fill_soc_initial,
     model_with_vehicle,
     read_trips,
     report_rejected,
@@ -78,6 +81,24 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.learning.model import HybridModel  # torch: after the checks
 
     model = model_with_vehicle(HybridModel.load(args.model), args)
+    from hybridev.cli.stream import predict_streaming, should_stream
+
+    if should_stream(args):  # a big single file: chunks, flat memory, same numbers
+        mapping = column_mapping(args)
+
+        def prepare(chunk):
+            chunk = apply_columns(chunk, mapping, what=str(args.trips), strict=False)
+            return fill_soc_initial(chunk, args.soc_initial)
+
+        def score_chunk(m, trips, a):
+            try:
+                return score(m, trips, a)
+            except ValueError as exc:
+                raise hint_missing_soc(exc) from exc
+
+        n, what = predict_streaming(model, args, score_chunk, prepare)
+        print(f"wrote {n} {what} to {args.out}")
+        return 0
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)
     try:
