@@ -25,10 +25,10 @@ from pathlib import Path
 
 __all__ = ["CHUNK_ROWS", "STREAM_MIN_BYTES", "iter_table", "predict_streaming", "should_stream"]
 
-CHUNK_ROWS = 20_000
+CHUNK_ROWS = 10_000
 """Trips scored at once when streaming."""
-STREAM_MIN_BYTES = 16 << 20
-"""Trip tables from this size on (16 MiB, about 150,000 trips) are streamed."""
+STREAM_MIN_BYTES = 2 << 20
+"""Trip tables from this size on (2 MiB, about 20,000 trips) are streamed."""
 
 
 def should_stream(args: argparse.Namespace) -> bool:

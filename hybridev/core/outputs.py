@@ -9,18 +9,29 @@ The rules (also in the README, section "Safety"):
   a wrong extension for the format, a path that is also an input (or inside
   an input folder, or a folder holding an input), a file path that is a
   folder, a folder path that is a file.
-* **Atomic.** Everything is written into a temporary name in the same folder
-  and moved into place with :func:`os.replace` only when complete; on any
-  error, and on SIGINT/SIGTERM, the temporary files are removed and any
-  previous output is left as it was.
+* **Atomic, and crash-consistent.** Everything is written into a hidden
+  temporary name in the same folder and moved into place only when complete: a
+  file by :func:`os.replace`, a folder by an atomic exchange with the old one
+  (``renameat2(RENAME_EXCHANGE)`` on Linux; a journalled two-step rename
+  elsewhere), so at every instant the path holds the complete old or the
+  complete new output, whatever ends the process (an error, SIGINT, SIGTERM,
+  SIGKILL). On an error or SIGINT/SIGTERM the temporary files are removed at
+  once; after a SIGKILL the next write to that place removes (or restores) them
+  and says so (:mod:`hybridev.core.swap`, :mod:`hybridev.core.merge`).
+* **Never over an input.** Outputs and inputs are compared as the files the OS
+  resolves (symlinks in the folders, ``..``, hard links by device and inode),
+  and a folder output may not lie inside an input folder (a data set would read
+  it back). Nothing is written under ``/dev``, ``/proc`` or ``/sys``, nor over a
+  device file, FIFO or socket. OS errors (name too long, permission, read-only
+  or full disk) are ``ValueError`` naming the option.
 * **Never destroy what we did not write.** A *file* output replaces an
   existing file only if hybridev wrote it there and nobody changed it since
   (the folder's register :data:`~hybridev.core.owned.REGISTER_FILE`, with the
   SHA-256 of each file written; :mod:`hybridev.core.owned`); never a file of
   the user's, a folder or an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
   model, a report) replaces an existing folder only if it is empty or carries
-  this package's marker :data:`MANIFEST_FILE` listing every file in it (a
-  folder hybridev wrote, and nothing added since). A *merged* folder
+  this package's marker :data:`MANIFEST_FILE` listing every file in it with its
+  SHA-256 (a folder hybridev wrote, and nothing added or changed since). A *merged* folder
   (``kind="merge_dir"``, ``hybridev demo``) keeps the files the user put
   there and replaces only the entries hybridev wrote there before.
 
@@ -50,17 +61,16 @@ reading in :mod:`hybridev.core.npz`. Callers that add inputs or outputs (new
 CLI options) pass every input path to ``inputs=`` and call
 :func:`check_output` before reading anything large.
 
-Module size (about 450 lines, over the package's 400-line guide): every rule on
+Module size (about 440 lines, over the package's 400-line guide): every rule on
 what may be written where is here, in one place to audit; its helpers with a job of
-their own already live beside it (:mod:`hybridev.core.manifest`,
-:mod:`hybridev.core.owned`, :mod:`hybridev.core.cleanup`).
+their own live beside it (:mod:`hybridev.core.manifest`, :mod:`hybridev.core.owned`,
+:mod:`hybridev.core.cleanup`, :mod:`hybridev.core.swap`, :mod:`hybridev.core.merge`,
+:mod:`hybridev.core.paths`, :mod:`hybridev.core.csvsafe`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import errno
-import glob
 import os
 import stat
 import tempfile
@@ -68,6 +78,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from hybridev.core.cleanup import guard, remove_path
+from hybridev.core.csvsafe import neutralise_formulas
 from hybridev.core.manifest import (
     MANIFEST_FILE,
     foreign_files,
@@ -78,13 +89,21 @@ from hybridev.core.manifest import (
 )
 from hybridev.core.merge import merge_into, recover_merge
 from hybridev.core.owned import REGISTER_FILE, is_owned, record_owned
+from hybridev.core.paths import (
+    SYSTEM_ROOTS,
+    inside,
+    os_reason,
+    real_input,
+    resolve_output,
+    same_file,
+    system_path,
+)
 from hybridev.core.swap import fault, recover, replace_dir, undo_dir
 
 __all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "REGISTER_FILE", "TABLE_SUFFIXES", "atomic_file",
            "atomic_replace", "check_output", "is_hybridev_dir", "neutralise_formulas", "os_reason",
-           "output_dir", "read_manifest",
-           "save_figure",
-           "sha256_file", "write_table", "write_text"]
+           "output_dir", "read_manifest", "save_figure", "sha256_file", "write_table",
+           "write_text"]
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
@@ -95,52 +114,6 @@ _KINDS = ("file", "model_dir", "dir", "merge_dir")
 # A new folder named like a file is almost always a mistake (``--out model.csv``).
 _FILE_LIKE_SUFFIXES = (".csv", ".parquet", ".pq", ".json", ".html", ".xlsx", ".png", ".pdf",
                        ".svg", ".txt")
-
-def _resolve(p: str | os.PathLike) -> Path:
-    """The path the OS will write: symlinks in the folders resolved (``ld/../x`` as the OS
-    reads it, not collapsed as text); the last component kept as named."""
-    raw = os.path.expanduser(os.fspath(p))
-    head, tail = os.path.split(raw.rstrip("/") or raw)
-    if tail in ("", ".", ".."):
-        return Path(os.path.realpath(raw))
-    return Path(os.path.realpath(head or ".")) / tail
-
-
-def _real_input(p: str | os.PathLike) -> Path:
-    """The real file or folder an input names (a glob: the folder it starts from)."""
-    raw = os.path.expanduser(os.fspath(p))
-    if glob.has_magic(raw):
-        parts = Path(raw).parts
-        keep = next(i for i, part in enumerate(parts) if glob.has_magic(part))
-        raw = os.path.join(*parts[:keep]) if keep else "."
-    return Path(os.path.realpath(raw))
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    """Same inode (a hard link, a bind mount) or the same real path."""
-    if a == b:
-        return True
-    try:
-        sa, sb = os.stat(a), os.stat(b)
-    except OSError:
-        return False
-    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
-
-
-_SYSTEM_ROOTS = ("/dev", "/proc", "/sys")
-
-
-def _system_path(p: Path) -> bool:
-    return os.name == "posix" and any(p == Path(r) or _inside(p, Path(r)) for r in _SYSTEM_ROOTS)
-
-
-def _inside(child: Path, parent: Path) -> bool:
-    try:
-        child.relative_to(parent)
-    except ValueError:
-        return False
-    return True
-
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = "file",
                  suffixes: Iterable[str] | None = None,
@@ -204,37 +177,22 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
         raise ValueError(f"{what} cannot be used: {os_reason(exc)}") from exc
 
 
-def os_reason(exc: OSError) -> str:
-    """One line for an OS error: its text and what to do (name too long, permission, ...)."""
-    hints = {errno.ENAMETOOLONG: "shorten the name",
-             errno.EACCES: "check the permissions of its folders",
-             errno.EPERM: "check the permissions of its folders",
-             errno.EROFS: "the file system is read-only: choose another place",
-             errno.ENOSPC: "the disk is full: free space or choose another place",
-             errno.EDQUOT: "the disk quota is exceeded: free space or choose another place",
-             errno.ELOOP: "a symbolic link loops",
-             errno.ENOTDIR: "a part of the path is not a folder"}
-    text = exc.strerror or str(exc)
-    hint = hints.get(exc.errno)
-    return f"{text} ({hint})" if hint else text
-
-
 def _check(raw: str, what: str, kind: str, suffixes, inputs, names, legacy) -> Path:
-    p = _resolve(raw)
+    p = resolve_output(raw)
     rp = Path(os.path.realpath(p))
-    if _system_path(rp) or _system_path(p):
-        raise ValueError(f"{what} lies under {', '.join(_SYSTEM_ROOTS)}: hybridev writes "
+    if system_path(rp) or system_path(p):
+        raise ValueError(f"{what} lies under {', '.join(SYSTEM_ROOTS)}: hybridev writes "
                          "regular files only; choose a path in your own folders")
     for inp in inputs:
         if inp is None:
             continue
-        q = _real_input(inp)
-        if _same_file(q, rp):
+        q = real_input(inp)
+        if same_file(q, rp):
             raise ValueError(f"{what} is also an input of this run ({str(inp)!r}); hybridev "
                              "never writes over its input: choose another path")
-        if kind != "file" and _inside(q, rp):
+        if kind != "file" and inside(q, rp):
             raise ValueError(f"{what} holds the input {str(inp)!r}; choose another path")
-        if q.is_dir() and _inside(rp, q):
+        if q.is_dir() and inside(rp, q):
             raise ValueError(f"{what} lies inside the input folder {str(inp)!r} (the next "
                              "run would read it back as input); choose another path")
     if kind == "merge_dir":
@@ -258,7 +216,7 @@ def _check(raw: str, what: str, kind: str, suffixes, inputs, names, legacy) -> P
                              "file with a folder: choose another path")
         if p.is_dir() and p.is_symlink():
             raise ValueError(f"{what} is a symbolic link; give the real folder")
-        if p.is_dir() and kind in ("model_dir", "dir") and _inside(Path(os.getcwd()), rp):
+        if p.is_dir() and kind in ("model_dir", "dir") and inside(Path(os.getcwd()), rp):
             raise ValueError(f"{what} is the current folder (or holds it); it would be "
                              "replaced as a whole: give a new folder name")
         if p.is_dir() and kind in ("model_dir", "dir"):
@@ -354,7 +312,7 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     folder's own marker) and for the outputs that the project's own workflow
     scripts (``evaluation/``, ``calibration/``, ``benchmarks/``) regenerate in place.
     """
-    path = _resolve(path)
+    path = resolve_output(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         recover(path, names=(REGISTER_FILE[1:],))  # leftovers of a crashed earlier run
@@ -399,40 +357,6 @@ def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
             df.to_parquet(tmp, index=False)
         else:
             neutralise_formulas(df).to_csv(tmp, index=False)
-
-
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-
-
-def _defuse(v):
-    if not isinstance(v, str) or not v.startswith(_FORMULA_START):
-        return v
-    try:
-        float(v)
-        return v  # a number written as text ("-5") is not a formula
-    except ValueError:
-        return "'" + v
-
-
-def neutralise_formulas(df):
-    """Text cells a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab or
-    carriage return first, and not a number) get a leading ``'``; numbers are untouched.
-
-    Examples
-    --------
-    >>> import pandas as pd
-    >>> neutralise_formulas(pd.DataFrame({"id": ["=1+2", "-5", "a"], "x": [-1.0, 2, 3]}))["id"].tolist()
-    ["'=1+2", '-5', 'a']
-    """
-    text = [c for c in df.columns
-            if df[c].dtype == object or str(df[c].dtype) in ("string", "str")]
-    if not text:
-        return df
-    out = df.copy(deep=False)
-    for c in text:
-        out[c] = df[c].map(_defuse)
-    renamed = {c: _defuse(c) for c in out.columns if isinstance(c, str)}
-    return out.rename(columns=renamed)
 
 
 def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:

@@ -108,7 +108,7 @@ def test_model_folder(files, tmp_path, step, sig):
 @pytest.mark.parametrize("step", swap.STEPS["file"])
 def test_prediction_file(files, tmp_path, step, sig):
     def write(v, path, fault):
-        return _py(["-m", "hybridev", "predict", str(files / "model1"),
+        return _py(["-m", "hybridev.cli", "predict", str(files / "model1"),
                     str(files / f"trips{v}.csv"), "--out", str(path)], fault)
 
     _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE})
@@ -120,7 +120,7 @@ def test_fleet_folder(files, tmp_path, step, sig):
     pytest.importorskip("dask.distributed")
 
     def write(v, path, fault):
-        return _py(["-m", "hybridev", "predict", str(files / "model1"), str(files / f"ds{v}"),
+        return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
                     "--out", str(path), "--workers", "1"], fault)
 
     _case(write, tmp_path / "out" / "preds", step, sig, {"preds"})
@@ -132,7 +132,7 @@ def test_report_folder(files, tmp_path, sig):
         meas = pd.read_csv(files / "measured.csv")
         src = tmp_path / f"measured{v}.csv"
         (meas if v == "1" else meas.head(50)).to_csv(src, index=False)
-        return _py(["-m", "hybridev", "calibrate", str(src), "--out", str(path),
+        return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
                     "--members", "1", "--max-epochs", "3", "--quiet"], fault)
 
     _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"})
@@ -146,7 +146,7 @@ def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     (out / "notes.txt").write_text("the user's")
-    r = _py(["-m", "hybridev", "demo", "--quick", "--quiet", "--out", str(out)],
+    r = _py(["-m", "hybridev.cli", "demo", "--quick", "--quiet", "--out", str(out)],
             fault="merge.moved:SIGKILL", timeout=1800)
     assert r.returncode == -signal.SIGKILL, r.stderr
     assert any(n.startswith(".hybridev-merge.") for n in os.listdir(out))  # the journal
