@@ -1,43 +1,33 @@
 """hybridev: hybrid physics + residual-learning EV trip energy, with uncertainty.
 
-The physics core (parameters, force-balance model, trip synthesis and trip
-tables) is imported eagerly; everything that needs torch, scikit-learn or the
-optimisers (models, calibration, metrics, range, charging, reports) is
-imported on first use, so ``import hybridev`` stays fast.
+Every public name is imported on first use (the physics core, which needs
+numpy, pandas and scipy, as well as everything that needs torch, scikit-learn
+or the optimisers), so ``import hybridev`` and the CLI's ``--help``,
+``--version`` and argument checks stay fast.
 """
 
 import importlib
 
-from .physics.climate import aux_power_kw, hvac_power_kw
-from .physics.forces import (
-    soc_trajectory,
-    trace_energy_kwh,
-    trace_power_kw,
-    wheel_power_kw,
-)
-from .physics.kinematics import (
-    positive_kinetic_energy,
-    synthesize_speed_trace,
-)
-from .physics.params import (
-    PROFILES,
-    DrivingProfile,
-    VehicleParams,
-    get_profile,
-)
-from .physics.trips import (
-    TripTraces,
-    make_trips,
-    simulate,
-    trip_traces,
-)
-from .physics.validation import (
-    validate_trips,
-)
-
 __version__ = "0.1.0"
 
 _LAZY = {
+    "aux_power_kw": "physics.climate",
+    "hvac_power_kw": "physics.climate",
+    "soc_trajectory": "physics.forces",
+    "trace_energy_kwh": "physics.forces",
+    "trace_power_kw": "physics.forces",
+    "wheel_power_kw": "physics.forces",
+    "positive_kinetic_energy": "physics.kinematics",
+    "synthesize_speed_trace": "physics.kinematics",
+    "PROFILES": "physics.params",
+    "DrivingProfile": "physics.params",
+    "VehicleParams": "physics.params",
+    "get_profile": "physics.params",
+    "TripTraces": "physics.trips",
+    "make_trips": "physics.trips",
+    "simulate": "physics.trips",
+    "trip_traces": "physics.trips",
+    "validate_trips": "physics.validation",
     "ConstantRate": "learning.baselines",
     "LinearBaseline": "learning.baselines",
     "PhysicsOnly": "learning.baselines",

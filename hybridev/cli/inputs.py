@@ -199,16 +199,23 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
             raise ValueError(f"--columns: neither {path} nor {ts_path} has column(s) {missing}; "
                              f"their columns: {list(raw.columns)} and {list(raw_ts.columns)}")
         ts = apply_columns(raw_ts, mapping, what=str(ts_path), strict=False)
+        from hybridev.cli.traces import precheck_traces
+
+        ts = precheck_traces(ts)  # sort out-of-order samples; flag jumps and conflicts
         strict = False  # checked above over both files
     table = apply_columns(raw, mapping, what=str(path), strict=strict)
     if ts is None or "soc" not in ts.columns:  # a logged soc comes first
         table = fill_soc_initial(table, getattr(args, "soc_initial", None))
     try:
         if measured:
+            from hybridev.cli.traces import miles_hint
             from hybridev.data.logs import measured_from_frames
 
             m = measured_from_frames(table, ts, vehicle)
-            return m.trips, m.traces, m.rejected
+            rejected = m.rejected
+            if rejected is not None and len(rejected):
+                rejected = rejected.assign(reason=rejected["reason"].map(miles_hint))
+            return m.trips, m.traces, rejected
         if ts is None:
             return table, None, None
         from hybridev.data.logs import _derive_from_traces, harmonise_trip_ids, match_traces
@@ -219,6 +226,7 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
         table, ts = harmonise_trip_ids(table, ts)
         traces, rejected = validate_timeseries(ts)
         match_traces(table, traces, warn=False)
+        _check_against_traces(table, traces, path)  # as fit and calibrate do
         if len(rejected):  # the trips stay: predicted on a synthesised trace instead
             rejected = rejected.assign(reason=rejected["reason"].astype(str)
                                        + "; the trip is predicted on a synthesised trace")
@@ -228,6 +236,24 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
         return table, traces, rejected
     except ValueError as exc:
         raise hint_missing_soc(exc) from exc
+
+
+def _check_against_traces(table, traces, path) -> None:
+    """A trip row whose distance or mean speed disagrees with its trace is an error."""
+    from hybridev.cli.traces import miles_hint
+    from hybridev.data.logs import _trace_mismatch
+
+    parts = _trace_mismatch(table, traces)
+    if not parts:
+        return
+    import pandas as pd
+
+    bad = pd.concat(parts, ignore_index=True)
+    r = bad.iloc[0]
+    raise ValueError(f"{len(bad)} trip(s) of {path} disagree with their logged trace (fit and "
+                     f"calibrate reject such rows; first: row {r['row']}, trip_id="
+                     f"{r['trip_id']!r}: {miles_hint(r['reason'])}); fix the table or the "
+                     "trace, or leave the column out to derive it from the trace")
 
 
 def report_rejected(command: str, source: str, rejected, limit: int = 10) -> None:

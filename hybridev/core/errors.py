@@ -8,7 +8,7 @@ one small module so that no layer has to import another to raise or catch them.
 from __future__ import annotations
 
 __all__ = ["CalibrationWarning", "ConvergenceWarning", "DataWarning", "OutOfDomainWarning",
-           "PhysicsFallbackWarning"]
+           "PhysicsFallbackWarning", "RecoveryWarning"]
 
 
 class ConvergenceWarning(UserWarning):
@@ -29,3 +29,7 @@ class CalibrationWarning(UserWarning):
 
 class DataWarning(UserWarning):
     """Input is used, but with less than it could carry (e.g. a trip without its logged trace)."""
+
+
+class RecoveryWarning(UserWarning):
+    """A leftover of an interrupted earlier run was cleaned up or restored (what was done)."""

@@ -79,6 +79,19 @@ def read_table(path: str | os.PathLike, *, option: str | None = None,
     except Exception as exc:  # pyarrow raises its own errors for a damaged file
         raise ValueError(f"could not read {str(path)!r} as a table: "
                          f"{type(exc).__name__}: {exc}") from exc
+    first = str(table.columns[0]) if len(table.columns) else ""
+    if first.lstrip().startswith("#"):
+        raise ValueError(f"{what} starts with a comment line ({first[:40]!r}); the first line "
+                         "must be the header (column names): remove the comment lines")
+    padded = [c for c in table.columns if isinstance(c, str) and c != c.strip()]
+    if padded:
+        import warnings
+
+        from hybridev.core.errors import DataWarning
+
+        warnings.warn(f"{what}: column name(s) {padded[:5]} have spaces around them; read as "
+                      f"{[c.strip() for c in padded[:5]]}", DataWarning, stacklevel=2)
+        table = table.rename(columns={c: c.strip() for c in padded})
     if len(table.columns) == 1 and any(c in str(table.columns[0]) for c in ";\t"):
         sep = "';'" if ";" in str(table.columns[0]) else "tabs"
         raise ValueError(f"{what}: one column {str(table.columns[0])[:60]!r}: the file is "

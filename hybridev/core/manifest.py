@@ -51,14 +51,25 @@ def list_files(folder: Path) -> list[str]:
 
 
 def foreign_files(folder: Path, legacy: Callable[[Path], bool] | None = None) -> list[str]:
-    """Files in ``folder`` that hybridev did not write there (empty: safe to replace)."""
+    """Files in ``folder`` that hybridev did not write there, or that changed since
+    (their SHA-256 differs from the manifest's); empty: safe to replace."""
     files = [f for f in list_files(folder) if f != MANIFEST_FILE]
     if not files:
         return []
     doc = read_manifest(folder)
     if doc is None:
         return [] if legacy is not None and legacy(folder) else files
-    return [f for f in files if f not in doc["files"]]
+    listed = doc["files"]
+    return [f for f in files if f not in listed or not _unchanged(folder / f, listed[f])]
+
+
+def _unchanged(path: Path, digest) -> bool:
+    if digest == "folder":  # a merged folder's sub-folder: checked by its own manifest
+        return True
+    try:
+        return path.is_file() and not path.is_symlink() and sha256_file(path) == digest
+    except OSError:
+        return False
 
 
 def is_hybridev_dir(folder: str | os.PathLike) -> bool:

@@ -9,18 +9,29 @@ The rules (also in the README, section "Safety"):
   a wrong extension for the format, a path that is also an input (or inside
   an input folder, or a folder holding an input), a file path that is a
   folder, a folder path that is a file.
-* **Atomic.** Everything is written into a temporary name in the same folder
-  and moved into place with :func:`os.replace` only when complete; on any
-  error, and on SIGINT/SIGTERM, the temporary files are removed and any
-  previous output is left as it was.
+* **Atomic, and crash-consistent.** Everything is written into a hidden
+  temporary name in the same folder and moved into place only when complete: a
+  file by :func:`os.replace`, a folder by an atomic exchange with the old one
+  (``renameat2(RENAME_EXCHANGE)`` on Linux; a journalled two-step rename
+  elsewhere), so at every instant the path holds the complete old or the
+  complete new output, whatever ends the process (an error, SIGINT, SIGTERM,
+  SIGKILL). On an error or SIGINT/SIGTERM the temporary files are removed at
+  once; after a SIGKILL the next write to that place removes (or restores) them
+  and says so (:mod:`hybridev.core.swap`, :mod:`hybridev.core.merge`).
+* **Never over an input.** Outputs and inputs are compared as the files the OS
+  resolves (symlinks in the folders, ``..``, hard links by device and inode),
+  and a folder output may not lie inside an input folder (a data set would read
+  it back). Nothing is written under ``/dev``, ``/proc`` or ``/sys``, nor over a
+  device file, FIFO or socket. OS errors (name too long, permission, read-only
+  or full disk) are ``ValueError`` naming the option.
 * **Never destroy what we did not write.** A *file* output replaces an
   existing file only if hybridev wrote it there and nobody changed it since
   (the folder's register :data:`~hybridev.core.owned.REGISTER_FILE`, with the
   SHA-256 of each file written; :mod:`hybridev.core.owned`); never a file of
   the user's, a folder or an input. A *folder* output (``kind="model_dir"`` or ``"dir"``: a saved
   model, a report) replaces an existing folder only if it is empty or carries
-  this package's marker :data:`MANIFEST_FILE` listing every file in it (a
-  folder hybridev wrote, and nothing added since). A *merged* folder
+  this package's marker :data:`MANIFEST_FILE` listing every file in it with its
+  SHA-256 (a folder hybridev wrote, and nothing added or changed since). A *merged* folder
   (``kind="merge_dir"``, ``hybridev demo``) keeps the files the user put
   there and replaces only the entries hybridev wrote there before.
 
@@ -35,7 +46,8 @@ suffixes=..., inputs=[...], names=[...]) -> Path``
 ``atomic_replace(path, option=...)``
     The same without the ownership rule, for files inside folder outputs and
     the workflow scripts' own committed outputs.
-``write_table(df, path, option=...)``, ``write_text(text, path, option=...)``,
+``write_table(df, path, option=...)`` (CSV text cells that a spreadsheet would run
+as a formula get a leading ``'``: :func:`neutralise_formulas`), ``write_text(text, path, option=...)``,
 ``save_figure(fig, path, option=...)``
     One-call atomic writers (a failed write raises ``ValueError`` naming the option).
 ``output_dir(path, option=..., kind=..., manifest=None)``
@@ -49,22 +61,24 @@ reading in :mod:`hybridev.core.npz`. Callers that add inputs or outputs (new
 CLI options) pass every input path to ``inputs=`` and call
 :func:`check_output` before reading anything large.
 
-Module size (about 450 lines, over the package's 400-line guide): every rule on
+Module size (about 440 lines, over the package's 400-line guide): every rule on
 what may be written where is here, in one place to audit; its helpers with a job of
-their own already live beside it (:mod:`hybridev.core.manifest`,
-:mod:`hybridev.core.owned`, :mod:`hybridev.core.cleanup`).
+their own live beside it (:mod:`hybridev.core.manifest`, :mod:`hybridev.core.owned`,
+:mod:`hybridev.core.cleanup`, :mod:`hybridev.core.swap`, :mod:`hybridev.core.merge`,
+:mod:`hybridev.core.paths`, :mod:`hybridev.core.csvsafe`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from hybridev.core.cleanup import guard, remove_path
+from hybridev.core.csvsafe import neutralise_formulas
 from hybridev.core.manifest import (
     MANIFEST_FILE,
     foreign_files,
@@ -73,11 +87,23 @@ from hybridev.core.manifest import (
     sha256_file,
     write_manifest,
 )
+from hybridev.core.merge import merge_into, recover_merge
 from hybridev.core.owned import REGISTER_FILE, is_owned, record_owned
+from hybridev.core.paths import (
+    SYSTEM_ROOTS,
+    inside,
+    os_reason,
+    real_input,
+    resolve_output,
+    same_file,
+    system_path,
+)
+from hybridev.core.swap import fault, recover, replace_dir, undo_dir
 
 __all__ = ["FIGURE_SUFFIXES", "MANIFEST_FILE", "REGISTER_FILE", "TABLE_SUFFIXES", "atomic_file",
-           "atomic_replace", "check_output", "is_hybridev_dir", "output_dir", "read_manifest", "save_figure",
-           "sha256_file", "write_table", "write_text"]
+           "atomic_replace", "check_output", "is_hybridev_dir", "neutralise_formulas", "os_reason",
+           "output_dir", "read_manifest", "save_figure", "sha256_file", "write_table",
+           "write_text"]
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
@@ -88,18 +114,6 @@ _KINDS = ("file", "model_dir", "dir", "merge_dir")
 # A new folder named like a file is almost always a mistake (``--out model.csv``).
 _FILE_LIKE_SUFFIXES = (".csv", ".parquet", ".pq", ".json", ".html", ".xlsx", ".png", ".pdf",
                        ".svg", ".txt")
-
-def _resolve(p: str | os.PathLike) -> Path:
-    return Path(os.path.abspath(os.path.expanduser(os.fspath(p))))
-
-
-def _inside(child: Path, parent: Path) -> bool:
-    try:
-        child.relative_to(parent)
-    except ValueError:
-        return False
-    return True
-
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = "file",
                  suffixes: Iterable[str] | None = None,
@@ -156,22 +170,34 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
         raise ValueError(f"{option}={path!r} must be a non-empty path")
     if "\0" in raw:
         raise ValueError(f"{option}={raw!r} contains a NUL character")
-    p = _resolve(raw)
     what = f"{option}={raw!r}"
+    try:
+        return _check(raw, what, kind, suffixes, inputs, names, legacy)
+    except OSError as exc:
+        raise ValueError(f"{what} cannot be used: {os_reason(exc)}") from exc
+
+
+def _check(raw: str, what: str, kind: str, suffixes, inputs, names, legacy) -> Path:
+    p = resolve_output(raw)
     rp = Path(os.path.realpath(p))
+    if system_path(rp) or system_path(p):
+        raise ValueError(f"{what} lies under {', '.join(SYSTEM_ROOTS)}: hybridev writes "
+                         "regular files only; choose a path in your own folders")
     for inp in inputs:
         if inp is None:
             continue
-        q = Path(os.path.realpath(_resolve(inp)))
-        same = q == rp or (q.exists() and p.exists() and os.path.samefile(q, p))
-        if same:
-            raise ValueError(f"{what} is also an input of this run; hybridev never writes "
-                             "over its input: choose another path")
-        if kind != "file" and _inside(q, rp):
+        q = real_input(inp)
+        if same_file(q, rp):
+            raise ValueError(f"{what} is also an input of this run ({str(inp)!r}); hybridev "
+                             "never writes over its input: choose another path")
+        if kind != "file" and inside(q, rp):
             raise ValueError(f"{what} holds the input {str(inp)!r}; choose another path")
-        if q.is_dir() and _inside(rp, q):
-            raise ValueError(f"{what} lies inside the input folder {str(inp)!r}; choose "
-                             "another path")
+        if q.is_dir() and inside(rp, q):
+            raise ValueError(f"{what} lies inside the input folder {str(inp)!r} (the next "
+                             "run would read it back as input); choose another path")
+    if kind == "merge_dir":
+        recover_merge(p)
+    recover(p, names=(REGISTER_FILE[1:],) if kind == "file" else ())
     if kind == "file":
         if raw.endswith(("/", os.sep)) or p.is_dir():
             raise ValueError(f"{what} is a directory; give a file name")
@@ -180,7 +206,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
             if p.suffix.lower() not in allowed:
                 raise ValueError(f"{what} must end in one of {allowed}; got "
                                  f"{p.suffix or 'no extension'!r}")
-        if os.path.lexists(p) and (not p.is_file() or p.is_symlink()):
+        if os.path.lexists(p) and (not stat.S_ISREG(os.lstat(p).st_mode)):
             raise ValueError(f"{what} exists and is not a regular file")
         if os.path.lexists(p) and not is_owned(p):
             raise ValueError(_foreign_file(what))
@@ -190,7 +216,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
                              "file with a folder: choose another path")
         if p.is_dir() and p.is_symlink():
             raise ValueError(f"{what} is a symbolic link; give the real folder")
-        if p.is_dir() and kind in ("model_dir", "dir") and _inside(Path(os.getcwd()), rp):
+        if p.is_dir() and kind in ("model_dir", "dir") and inside(Path(os.getcwd()), rp):
             raise ValueError(f"{what} is the current folder (or holds it); it would be "
                              "replaced as a whole: give a new folder name")
         if p.is_dir() and kind in ("model_dir", "dir"):
@@ -204,21 +230,25 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", kind: str = 
             bad = foreign_files(p, legacy)
             if bad:
                 raise ValueError(
-                    f"{what} is an existing folder with files hybridev did not write there "
-                    f"(e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
+                    f"{what} is an existing folder with files hybridev did not write there, or "
+                    f"changed since (e.g. {bad[0]!r}); it would be replaced as a whole, so hybridev refuses: "
                     "give a new folder name")
         if p.is_dir() and kind == "merge_dir":
             doc = read_manifest(p)
             old = doc is None and legacy is not None and legacy(p)
-            listed = set(names) if old else set((doc or {"files": {}})["files"])
+            listed = dict.fromkeys(names, "") if old else dict((doc or {"files": {}})["files"])
             for name in names:
                 q = p / name
                 if not os.path.lexists(q):
                     continue
-                ours = name in listed and (not q.is_dir() or old or not foreign_files(q))
+                if q.is_dir() and not q.is_symlink():
+                    ours = name in listed and (old or not foreign_files(q))
+                else:  # a file: unchanged since hybridev wrote it
+                    ours = name in listed and (old or (stat.S_ISREG(os.lstat(q).st_mode)
+                                                       and listed[name] == sha256_file(q)))
                 if not ours:
                     raise ValueError(f"{what}: {str(q)!r} exists and was not written there by "
-                                     "hybridev; move it away or choose another folder")
+                                     "hybridev (or was changed since); move it away or choose another folder")
     anc = p.parent
     while not os.path.lexists(anc) and anc != anc.parent:
         anc = anc.parent
@@ -282,10 +312,12 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     folder's own marker) and for the outputs that the project's own workflow
     scripts (``evaluation/``, ``calibration/``, ``benchmarks/``) regenerate in place.
     """
-    path = _resolve(path)
+    path = resolve_output(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        recover(path, names=(REGISTER_FILE[1:],))  # leftovers of a crashed earlier run
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
+                                   dir=path.parent)
         os.close(fd)
         os.chmod(tmp, 0o644)  # mkstemp makes it private; the result is an ordinary file
     except OSError as exc:
@@ -294,13 +326,19 @@ def atomic_replace(path, option: str = "path", *, register: bool = False) -> Ite
     with guard(lambda: remove_path(tmp)):
         try:
             yield tmp
+            fault("file.written")
             if register and os.path.lexists(path) and not is_owned(path):
                 raise ValueError(_foreign_file(f"{option}={str(path)!r}"))
+            if register:  # the register accepts both versions while the file is replaced
+                record_owned(path, pending=tmp)
+                fault("file.pending")
             os.replace(tmp, path)
+            fault("file.replaced")
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
     if register:
         record_owned(path)
+        fault("file.done")
 
 
 def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
@@ -318,7 +356,7 @@ def write_table(df, path: str | os.PathLike, *, option: str = "--out") -> None:
         if Path(path).suffix.lower() in (".parquet", ".pq"):
             df.to_parquet(tmp, index=False)
         else:
-            df.to_csv(tmp, index=False)
+            neutralise_formulas(df).to_csv(tmp, index=False)
 
 
 def write_text(text: str, path: str | os.PathLike, *, option: str = "--out") -> None:
@@ -346,7 +384,8 @@ def save_figure(fig, path: str | os.PathLike, *, option: str = "--plot", **kwarg
 @contextlib.contextmanager
 def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "dir",
                manifest: dict | None = None, inputs: Iterable = (),
-               legacy: Callable[[Path], bool] | None = None) -> Iterator[Path]:
+               legacy: Callable[[Path], bool] | None = None,
+               names: Iterable[str] = ()) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``path`` on success, with a manifest.
 
     ``kind="model_dir"`` or ``"dir"``: ``path`` is replaced as a whole (allowed
@@ -369,83 +408,38 @@ def output_dir(path: str | os.PathLike, *, option: str = "--out", kind: str = "d
     ['_hybridev-manifest.json', 'x.txt']
     """
     info = {"kind": kind, **(manifest or {})}
+    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy,
+                          names=names)
     if kind == "merge_dir":
-        target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
-        yield from _merge(target, option, info, legacy)
+        def recheck(entries: list[str]) -> None:
+            check_output(target, option=option, kind=kind, names=entries, legacy=legacy)
+
+        try:
+            yield from merge_into(target, info, recheck)
+        except OSError as exc:
+            raise _could_not(option, path, exc) from exc
         return
-    target = check_output(path, option=option, kind=kind, inputs=inputs, legacy=legacy)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp",
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
                                     dir=target.parent))
         tmp.chmod(0o755)
     except OSError as exc:
         raise _could_not(option, path, exc) from exc
-    old = target.with_name(f".{target.name}.{os.getpid()}.old")
-    state = {"moved_old": False}
+    state: dict = {"old": None}
 
-    def cleanup() -> None:
-        if state["moved_old"] and not os.path.lexists(target) and old.exists():
-            os.replace(old, target)  # interrupted mid-swap: put the previous folder back
-        elif state["moved_old"]:
-            remove_path(old)
-        remove_path(tmp)
-
-    with guard(cleanup):
+    with guard(lambda: undo_dir(tmp, target, state)):
         try:
             yield tmp
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
         try:
+            fault("dir.written")
             write_manifest(tmp, info)
+            fault("dir.manifest")
             check_output(target, option=option, kind=kind, legacy=legacy)  # still replaceable
-            if target.exists():
-                remove_path(old)
-                os.replace(target, old)
-                state["moved_old"] = True
-            os.replace(tmp, target)
+            replace_dir(tmp, target, state)
+            undo_dir(tmp, target, state)  # removes the old folder
+            fault("dir.done")
         except OSError as exc:
             raise _could_not(option, path, exc) from exc
-
-
-def _merge(target: Path, option: str, info: dict, legacy) -> Iterator[Path]:
-    created = not os.path.lexists(target)
-    try:
-        target.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".hybridev.", suffix=".tmp", dir=target))
-        tmp.chmod(0o755)
-    except OSError as exc:
-        raise _could_not(option, target, exc) from exc
-
-    def cleanup() -> None:
-        remove_path(tmp)
-        if created and not (target / MANIFEST_FILE).exists():
-            with contextlib.suppress(OSError):
-                target.rmdir()  # only if still empty
-
-    with guard(cleanup):
-        try:
-            yield tmp
-        except OSError as exc:
-            raise _could_not(option, target, exc) from exc
-        names = sorted(p.name for p in tmp.iterdir())
-        check_output(target, option=option, kind="merge_dir", names=names, legacy=legacy)
-        old_doc = read_manifest(target) or {"files": {}}
-        try:
-            for name in names:
-                src, dst = tmp / name, target / name
-                if src.is_dir():
-                    if dst.exists():
-                        remove_path(dst)
-                    os.replace(src, dst)
-                else:
-                    os.replace(src, dst)
-            keep = {k: v for k, v in old_doc["files"].items() if os.path.lexists(target / k)}
-            files = dict(keep)
-            for name in names:
-                files[name] = "folder" if (target / name).is_dir() else sha256_file(target / name)
-            doc = {"written_by": "hybridev", **info, "files": dict(sorted(files.items()))}
-            with atomic_replace(target / MANIFEST_FILE, option) as mtmp:
-                mtmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise _could_not(option, target, exc) from exc

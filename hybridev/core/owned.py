@@ -29,7 +29,7 @@ REGISTER_FILE = ".hybridev-files.json"
 "hybridev", "files": {name: sha256}}``."""
 
 
-def _read(folder: Path) -> dict[str, str]:
+def _read(folder: Path) -> dict[str, list[str]]:
     try:
         doc = json.loads((folder / REGISTER_FILE).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError):
@@ -37,7 +37,10 @@ def _read(folder: Path) -> dict[str, str]:
     if not isinstance(doc, dict) or doc.get("written_by") != "hybridev":
         return {}
     files = doc.get("files")
-    return {str(k): str(v) for k, v in files.items()} if isinstance(files, dict) else {}
+    if not isinstance(files, dict):
+        return {}
+    return {str(k): [str(d) for d in v] if isinstance(v, list) else [str(v)]
+            for k, v in files.items()}
 
 
 def is_owned(path: str | os.PathLike) -> bool:
@@ -58,15 +61,19 @@ def is_owned(path: str | os.PathLike) -> bool:
     p = Path(path)
     if not p.is_file() or p.is_symlink():
         return False
-    digest = _read(p.parent).get(p.name)
+    digests = _read(p.parent).get(p.name, [])
     try:
-        return digest is not None and digest == sha256_file(p)
+        return bool(digests) and sha256_file(p) in digests
     except OSError:
         return False
 
 
-def record_owned(path: str | os.PathLike) -> None:
+def record_owned(path: str | os.PathLike, *, pending: str | os.PathLike | None = None) -> None:
     """Add ``path`` (just written by hybridev) to its folder's register.
+
+    ``pending``: the finished temporary file about to replace ``path``; its
+    digest is registered *beside* the current one, so that a crash between
+    the replacement and the final record leaves a file the next run may replace.
 
     A register that cannot be written is not an error: the file itself is
     complete, and the next run will only refuse to overwrite it.
@@ -74,11 +81,17 @@ def record_owned(path: str | os.PathLike) -> None:
     p = Path(path)
     files = _read(p.parent)
     try:
-        files[p.name] = sha256_file(p)
-        fd, tmp = tempfile.mkstemp(prefix=f"{REGISTER_FILE}.", suffix=".tmp", dir=p.parent)
+        if pending is None:
+            files[p.name] = [sha256_file(p)]
+        else:
+            now = sha256_file(p) if p.is_file() and not p.is_symlink() else None
+            keep = [now] if now is not None and now in files.get(p.name, []) else []
+            files[p.name] = [*keep, sha256_file(pending)]
+        doc = {k: v[0] if len(v) == 1 else v for k, v in sorted(files.items())}
+        fd, tmp = tempfile.mkstemp(prefix=f"{REGISTER_FILE}.{os.getpid()}.", suffix=".tmp",
+                                   dir=p.parent)
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump({"written_by": "hybridev", "files": dict(sorted(files.items()))}, fh,
-                      indent=1)
+            json.dump({"written_by": "hybridev", "files": doc}, fh, indent=1)
         os.chmod(tmp, 0o644)
         os.replace(tmp, p.parent / REGISTER_FILE)
     except OSError:

@@ -370,4 +370,6 @@ def load_model(cls, path: str | os.PathLike):
             RuntimeError) as exc:
         msg = f"missing entry {exc}" if isinstance(exc, KeyError) else str(exc)
         raise ValueError(f"{where} is not a valid saved {cls.__name__}: {msg}") from exc
+    from hybridev.learning.sanity import check_model_sanity  # semantic validation (issue 33)
+    check_model_sanity(model, path)
     return model

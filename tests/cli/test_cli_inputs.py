@@ -131,10 +131,15 @@ def test_output_format_checked_before_work(tmp_path, capsys, cmd):
     cmd = [str(tmp_path / c) if c in ("MODEL", "TRIPS", "S", "T") else c for c in cmd]
     cmd = [str(tmp_path / c) if c.endswith((".json", ".xlsx", "model.csv")) else c
            for c in cmd]
+    # the inputs exist (missing inputs are reported first, before any import)
+    (tmp_path / "MODEL").mkdir()
+    for name in ("TRIPS", "S", "T"):
+        (tmp_path / name).write_text("a\n1\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
     assert main(cmd) == 2
     err = capsys.readouterr().err
     assert "--out" in err
-    assert list(tmp_path.iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 def test_heater_kind_of_a_coastdown_vehicle(logger, tmp_path, capsys):

@@ -22,3 +22,21 @@ def test_comma_separated_and_text_ids(tmp_path):
     one = tmp_path / "one.csv"
     pd.DataFrame({"distance_km": [1.0, 2.0]}).to_csv(one, index=False)  # one column is fine
     assert read_table(one).shape == (2, 1)
+
+
+def test_comment_line_and_padded_header_get_a_hint(tmp_path):
+    import warnings
+
+    from hybridev.core.errors import DataWarning
+
+    p = tmp_path / "c.csv"
+    p.write_text("# exported by my logger\ntrip_id,distance_km\n1,2\n")
+    with pytest.raises(ValueError, match="comment line"):
+        read_table(p)
+    p.write_text("trip_id , distance_km\n1,2\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        t = read_table(p)
+    assert list(t.columns) == ["trip_id", "distance_km"]
+    assert any(issubclass(w.category, DataWarning) and "spaces" in str(w.message)
+               for w in caught)

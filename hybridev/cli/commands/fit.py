@@ -61,13 +61,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hybridev.core.outputs import check_output
+
+    check_output(args.out, option="--out", kind="model_dir",  # before the work and torch
+                 inputs=[args.measured, args.timeseries, getattr(args, "columns_file", None)])
     from hybridev.core.progress import progress_bar
     from hybridev.learning.model import HybridModel
     from hybridev.learning.persist import check_model_path
 
     check_model_path(args.out, option="--out",
                      inputs=[args.measured, args.timeseries,
-                             getattr(args, "columns_file", None)])  # before the work
+                             getattr(args, "columns_file", None)])
     vehicle = vehicle_from_args(args)
     if args.skip_bad_rows or args.timeseries is not None:
         table, traces, rejected = read_trips(args.measured, args, measured=True,

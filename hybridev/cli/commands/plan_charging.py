@@ -17,6 +17,11 @@ from hybridev.cli.inputs import (
 NAME = "plan-charging"
 HELP = "cheapest charging plan keeping P(SoC < soc_min) below a risk level"
 
+MAX_N_SAMPLES = 100_000
+"""Upper bound of ``--n-samples`` (the scenario method solves one MILP row per sample)."""
+MAX_N_EVAL = 1_000_000
+"""Upper bound of ``--n-eval`` (8 bytes per sample and trip are held at once)."""
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("schedule", help="trip schedule .csv/.parquet (departure, distance_km, "
@@ -38,9 +43,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=("quantile", "scenario"), default="quantile",
                    help="chance-constraint method (default quantile)")
     p.add_argument("--n-samples", type=int, default=None,
-                   help="calibration samples (default 4000 quantile / 300 scenario)")
+                   help="calibration samples, [100, 100000] (default 4000 quantile / 300 "
+                        "scenario)")
     p.add_argument("--n-eval", type=int, default=20000,
-                   help="fresh samples for the achieved risk (default 20000)")
+                   help="fresh samples for the achieved risk, [100, 1000000] (default 20000)")
     p.add_argument("--level", type=float, default=0.9,
                    help="central level of the reported SoC and energy bands, and the level "
                         "whose conformal correction sets the model's predictive spread, "
@@ -55,7 +61,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_vehicle_arguments(p)
 
 
+def _check_sizes(args: argparse.Namespace) -> None:
+    for opt, value, hi in (("--n-samples", args.n_samples, MAX_N_SAMPLES),
+                           ("--n-eval", args.n_eval, MAX_N_EVAL)):
+        if value is not None and not 100 <= value <= hi:
+            raise ValueError(f"{opt}={value} is outside the allowed range [100, {hi}]")
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_sizes(args)  # before any allocation
     from hybridev.apps.charging.plan import plan_charging
     from hybridev.core.errors import OutOfDomainWarning
     from hybridev.core.fileio import read_table, write_table

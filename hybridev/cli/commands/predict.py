@@ -20,6 +20,9 @@ import argparse
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
+    apply_columns,
+    column_mapping,
+    fill_soc_initial,
     model_with_vehicle,
     read_trips,
     report_rejected,
@@ -61,9 +64,12 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.core.fileio import write_table
     from hybridev.core.outputs import TABLE_SUFFIXES, check_output
     from hybridev.core.plugins import entry_point, is_dataset
-    from hybridev.learning.model import HybridModel
 
+    inputs = [args.model, args.trips, args.timeseries, getattr(args, "columns_file", None)]
     if is_dataset(args.trips):  # a glob or folder: dask (hybridev.fleet.cli.run_predict)
+        # the output folder may not be, hold or lie inside an input (the next run would
+        # read its own predictions back as trips)
+        check_output(args.out, kind="dir", inputs=inputs)
         return entry_point("cli.predict")(args)
     for opt in ("scheduler", "workers"):
         if getattr(args, opt, None) is not None:
@@ -71,10 +77,28 @@ def run(args: argparse.Namespace) -> int:
                              f"'trips/*.parquet' or a folder); got the single file {args.trips!r}")
     if args.point and args.level is not None:
         raise ValueError("--point and --level exclude each other: --level asks for intervals")
-    check_output(args.out, suffixes=TABLE_SUFFIXES,
-                 inputs=[args.model, args.trips, args.timeseries,
-                         getattr(args, "columns_file", None)])
+    check_output(args.out, suffixes=TABLE_SUFFIXES, inputs=inputs)
+    from hybridev.learning.model import HybridModel  # torch: after the checks
+
     model = model_with_vehicle(HybridModel.load(args.model), args)
+    from hybridev.cli.stream import predict_streaming, should_stream
+
+    if should_stream(args):  # a big single file: chunks, flat memory, same numbers
+        mapping = column_mapping(args)
+
+        def prepare(chunk):
+            chunk = apply_columns(chunk, mapping, what=str(args.trips), strict=False)
+            return fill_soc_initial(chunk, args.soc_initial)
+
+        def score_chunk(m, trips, a):
+            try:
+                return score(m, trips, a)
+            except ValueError as exc:
+                raise hint_missing_soc(exc) from exc
+
+        n, what = predict_streaming(model, args, score_chunk, prepare)
+        print(f"wrote {n} {what} to {args.out}")
+        return 0
     trips, traces, rejected = read_trips(args.trips, args, measured=False)
     report_rejected(NAME, args.timeseries, rejected)
     try:

@@ -17,7 +17,7 @@ _PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--soc", type=float, required=True, help="SoC at departure, (0, 1]")
     p.add_argument("--speed", type=float, required=True, help="mean speed, km/h, (0, 250]")
-    p.add_argument("--temp", type=float, required=True, help="ambient temperature, degC, "
+    p.add_argument("--temp", type=float, required=True, help="ambient temperature, °C, "
                                                              "[-50, 60]")
     p.add_argument("--mode", choices=("eco", "normal", "aggressive"), default=None,
                    help="driving mode (default: unknown)")
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         out = predict_range(model, cond, soc_initial=args.soc, soc_reserve=args.reserve,
                             seed=args.seed).iloc[0]
         fan = soc_fan(model, cond, soc_initial=args.soc, seed=args.seed) if args.plot else None
-    what = (f"{args.speed:g} km/h, {args.mode or 'unknown mode'}, {args.temp:g} degC"
+    what = (f"{args.speed:g} km/h, {args.mode or 'unknown mode'}, {args.temp:g} °C"
             + (f", {args.hour:g} h" if args.hour is not None else "")
             + (f", grade {args.grade:g} %" if args.grade is not None else ""))
     print(f"range from SoC {args.soc:g} to reserve {args.reserve:g} "

@@ -1,0 +1,161 @@
+"""Fault injection on the real write paths: model folder, prediction file, fleet folder,
+report folder and demo folder (slow: each case starts a fresh process that imports torch).
+
+As in :mod:`tests.core.test_crash`: an old output is written, a run that would
+write a different new output is killed at a named step (``HYBRIDEV_FAULT``),
+and the path must then hold the complete old or the complete new output; the
+next run writes the new output and leaves nothing else beside it.
+"""
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev.core import swap
+from hybridev.core.outputs import MANIFEST_FILE, REGISTER_FILE
+
+pytestmark = pytest.mark.slow
+ROOT = Path(__file__).parents[2]
+SIGNALS = ("SIGINT", "SIGTERM", "SIGKILL")
+DIR_STEPS = [s for s in swap.STEPS["dir"] if s != "dir.old_moved"]
+
+
+def _py(args, fault=None, timeout=600):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env.pop("HYBRIDEV_FAULT", None)
+    if fault:
+        env["HYBRIDEV_FAULT"] = fault
+    return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
+                          timeout=timeout, preexec_fn=lambda: [
+                              signal.signal(s, signal.SIG_DFL)
+                              for s in (signal.SIGINT, signal.SIGTERM)])
+
+
+def snapshot(path: Path):
+    if not path.exists():
+        return None
+    if path.is_file():
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    return {p.relative_to(path).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(path.rglob("*")) if p.is_file()
+            and not p.relative_to(path).parts[0].startswith(".hybridev")}
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    from hybridev import HybridModel, make_trips, simulate
+
+    d = tmp_path_factory.mktemp("crash")
+    t = simulate(make_trips(60, seed=3), n_steps=100, seed=3)
+    t["energy_kwh"] = t["energy_kwh_physics"] * (1.05 + 0.03 * np.random.default_rng(3)
+                                                 .normal(size=len(t)))
+    meas = t[["trip_id", "distance_km", "avg_speed_kmh", "mode", "temperature_c",
+              "soc_initial", "hour", "energy_kwh"]]
+    meas.to_csv(d / "measured.csv", index=False)
+    trips = meas.drop(columns=["energy_kwh"])
+    trips.to_csv(d / "trips1.csv", index=False)
+    trips.head(30).to_csv(d / "trips2.csv", index=False)
+    for v, tab in (("1", trips), ("2", trips.head(30))):
+        (d / f"ds{v}").mkdir()
+        tab.to_parquet(d / f"ds{v}" / "part.parquet")
+    HybridModel(max_epochs=3, n_steps=100, n_members=2).fit(meas, seed=0).save(d / "model1")
+    HybridModel(max_epochs=3, n_steps=100, n_members=1, heteroscedastic=False,
+                calibrate_physics=False, conformal_fraction=0.0).fit(
+        meas, seed=0).save(d / "model2")
+    return d
+
+
+def _case(write, target: Path, step: str, sig: str, expected: set[str]):
+    """``write(version, path, fault)`` -> CompletedProcess."""
+    ref = target.parent.parent / "ref" / target.name
+    ref.parent.mkdir(parents=True, exist_ok=True)
+    r = write("2", ref, None)
+    assert r.returncode == 0, r.stderr
+    new = snapshot(ref)
+    r = write("1", target, None)
+    assert r.returncode == 0, r.stderr
+    old = snapshot(target)
+    assert old != new
+    r = write("2", target, f"{step}:{sig}")
+    assert r.returncode != 0, (step, sig, r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr or (sig == "SIGINT" and "KeyboardInterrupt" in r.stderr)
+    assert snapshot(target) in (old, new), (step, sig)
+    r = write("2", target, None)
+    assert r.returncode == 0, (step, sig, r.stderr)
+    assert snapshot(target) == new
+    assert sorted(os.listdir(target.parent)) == sorted(expected), (step, sig)
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+@pytest.mark.parametrize("step", DIR_STEPS)
+def test_model_folder(files, tmp_path, step, sig):
+    def write(v, path, fault):
+        code = ("import sys; from hybridev import HybridModel; "
+                "HybridModel.load(sys.argv[1]).save(sys.argv[2])")
+        return _py(["-c", code, str(files / f"model{v}"), str(path)], fault)
+
+    _case(write, tmp_path / "out" / "m", step, sig, {"m"})
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+@pytest.mark.parametrize("step", swap.STEPS["file"])
+def test_prediction_file(files, tmp_path, step, sig):
+    def write(v, path, fault):
+        return _py(["-m", "hybridev.cli", "predict", str(files / "model1"),
+                    str(files / f"trips{v}.csv"), "--out", str(path)], fault)
+
+    _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE})
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+@pytest.mark.parametrize("step", DIR_STEPS)
+def test_fleet_folder(files, tmp_path, step, sig):
+    pytest.importorskip("dask.distributed")
+
+    def write(v, path, fault):
+        return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
+                    "--out", str(path), "--workers", "1"], fault)
+
+    _case(write, tmp_path / "out" / "preds", step, sig, {"preds"})
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+def test_report_folder(files, tmp_path, sig):
+    def write(v, path, fault):
+        meas = pd.read_csv(files / "measured.csv")
+        src = tmp_path / f"measured{v}.csv"
+        (meas if v == "1" else meas.head(50)).to_csv(src, index=False)
+        return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
+                    "--members", "1", "--max-epochs", "3", "--quiet"], fault)
+
+    _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"})
+
+
+def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):
+    from hybridev.apps.demo import DEMO_OUTPUTS, _legacy_demo
+    from hybridev.core.manifest import sha256_file
+    from hybridev.core.outputs import check_output
+
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    r = _py(["-m", "hybridev.cli", "demo", "--quick", "--quiet", "--out", str(out)],
+            fault="merge.moved:SIGKILL", timeout=1800)
+    assert r.returncode == -signal.SIGKILL, r.stderr
+    assert any(n.startswith(".hybridev-merge.") for n in os.listdir(out))  # the journal
+    check_output(out, kind="merge_dir", names=DEMO_OUTPUTS, legacy=_legacy_demo)  # next start
+    names = sorted(os.listdir(out))
+    assert not [n for n in names if n.startswith(".")], names
+    assert (out / "notes.txt").read_text() == "the user's"
+    man = __import__("json").loads((out / MANIFEST_FILE).read_text())
+    for name, digest in man["files"].items():
+        if digest != "folder":
+            assert sha256_file(out / name) == digest
+    assert (out / "report" / "report.html").is_file()
