@@ -11,14 +11,15 @@ import copy
 import numpy as np
 import pandas as pd
 
+from hybridev.physics._kernel import synthetic_sums
 from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.forces import MOVING_MPS, _moving_steps
-from hybridev.physics.kinematics import profile_table, trace_keys
+from hybridev.physics.kinematics import _check_steps, profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, HEATING_OFFSET_GRID_K, PhysicsStats
 from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
 from hybridev.physics.traces import LoggedTraces
-from hybridev.physics.trips import _blocks
+from hybridev.physics.trips import _blocks, _check_seed
 
 __all__ = ["parked_seconds", "stats_from_logs", "stats_from_traces", "trip_stats"]
 
@@ -410,23 +411,49 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                 "mode": modes[~rl], "trip_id": keys[trip[~rl]]}
         if "grade_pct" in trips.columns:
             cols["grade_pct"] = trips["grade_pct"].to_numpy(float)[trip[~rl]]
-        syn = pd.DataFrame(cols)
-        syn_modes = modes[~rl]  # object array (pandas would iterate a string column slowly)
-        dest = np.flatnonzero(~rl)
-        for blk, v, dt, grade in _blocks(syn, n_steps, seed):
-            s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
-                                  grade_rad=grade, _offset_grid=False)
-            for name in sums:
-                sums[name][dest[blk]] = getattr(s, name)
-            duration[dest[blk]] = s.duration_h * 3600.0
-            moving[dest[blk]] = s.moving_h * 3600.0
-            vmax[dest[blk]] = s.max_speed_kmh
+        _synthetic_rows(cols, np.flatnonzero(~rl), veh, n_steps, seed,
+                        sums, duration, moving, vmax)
     parked = parked_seconds(trips)
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
                     moving_s=moving, parked_s=None if parked is None else parked[trip],
                     heating_grid_kw=heat_grid)
+
+
+def _synthetic_rows(cols, dest, veh, n_steps, seed, sums, duration, moving, vmax) -> None:
+    """Fill rows ``dest`` of the outputs from the synthetic traces of ``cols``.
+
+    The fused kernel (:mod:`hybridev.physics._kernel`) when numba is available,
+    else the traces are built in blocks and summed by :func:`stats_from_traces`
+    (the same numbers to rounding).
+    """
+    n_steps, seed = _check_steps(n_steps), _check_seed(seed)
+    fused = None
+    if len(dest):
+        for name in ("distance_km", "avg_speed_kmh"):
+            x = cols[name]
+            if not np.all(np.isfinite(x) & (x > 0)):
+                bad = float(x[~(np.isfinite(x) & (x > 0))][0])
+                raise ValueError(f"{name}={bad!r} is outside the allowed range (0, inf)")
+        grade = np.arctan(cols["grade_pct"] / 100.0) if "grade_pct" in cols else 0.0
+        fused = synthetic_sums(cols["distance_km"], cols["avg_speed_kmh"], cols["mode"],
+                               cols["trip_id"], grade, n_steps, seed, veh)
+    if fused is not None:
+        sp, sn, duration[dest], moving[dest], vmax[dest] = fused
+        for i, c in enumerate(_SUMS):
+            sums[f"{c}_pos"][dest] = sp[i]
+            sums[f"{c}_neg"][dest] = sn[i]
+        return
+    syn_modes = cols["mode"]  # object array (pandas would iterate a string column slowly)
+    for blk, v, dt, grade in _blocks(pd.DataFrame(cols), n_steps, seed):
+        s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
+                              grade_rad=grade, _offset_grid=False)
+        for name in sums:
+            sums[name][dest[blk]] = getattr(s, name)
+        duration[dest[blk]] = s.duration_h * 3600.0
+        moving[dest[blk]] = s.moving_h * 3600.0
+        vmax[dest[blk]] = s.max_speed_kmh
 
 
 def parked_seconds(trips: pd.DataFrame) -> np.ndarray | None:
