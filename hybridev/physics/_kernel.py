@@ -51,49 +51,43 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
     """
     n = ratio.shape[0]
     v = np.empty(n_steps + 1)
-    h = np.empty(n_steps // MIN_STEPS_PER_CYCLE + 1)
     for i in range(n):
         nc = n_cyc[i]
         z0 = z_start[i]
         hsum = 0.0
         for j in range(nc):
-            hj = min(h0[i] * np.exp(sig[i] * z[z0 + j] - half_sig2[i]), h_hi[i])
-            h[j] = hj
-            hsum += hj
+            hsum += min(h0[i] * np.exp(sig[i] * z[z0 + j] - half_sig2[i]), h_hi[i])
         base = vb[i] - w[i] * hsum / nc
-        # the unit cycle shape times the cycle's swing, sample by sample
+        # the unit cycle shape times the cycle's swing, cycle by cycle: cycle j holds
+        # the samples k with floor(k nc / N) = j (the last sample closes the last cycle)
         r, ia, ob, ib = ratio[i], inv_fa[i], one_minus_fb[i], inv_fb[i]
         total = 0.0
-        for k in range(n_steps + 1):
-            tau = k * r
-            tau -= np.floor(tau)
-            up = min(tau * ia, 1.0)
-            down = max((tau - ob) * ib, 0.0)
-            j = (k * nc) // n_steps
-            if j >= nc:
-                j = nc - 1
-            x = (up - down) * h[j]
-            v[k] = x
-            total += x
+        k = 0
+        for j in range(nc):
+            hj = min(h0[i] * np.exp(sig[i] * z[z0 + j] - half_sig2[i]), h_hi[i])
+            stop = ((j + 1) * n_steps + nc - 1) // nc if j < nc - 1 else n_steps + 1
+            while k < stop:
+                tau = k * r
+                tau -= np.floor(tau)
+                up = min(tau * ia, 1.0)
+                down = max((tau - ob) * ib, 0.0)
+                x = (up - down) * hj
+                v[k] = x
+                total += x
+                k += 1
         swing_dist = (total - 0.5 * (v[0] + v[n_steps])) * dt[i]
         floor = base + (d_m[i] - base * duration[i] - swing_dist) / duration[i]
         # force sums over the intervals, split by the sign of the wheel force
         mdt, gf = m_over_dt[i], grade_force[i]
         p0 = p2 = p3 = p4 = q0 = q2 = q3 = q4 = 0.0
         moving = 0.0
-        prev = v[0] + floor
-        if prev < 0.0:
-            prev = 0.0
+        prev = max(v[0] + floor, 0.0)
         vmax = prev
         for k in range(1, n_steps + 1):
-            cur = v[k] + floor
-            if cur < 0.0:
-                cur = 0.0
-            if cur > vmax:
-                vmax = cur
+            cur = max(v[k] + floor, 0.0)
+            vmax = max(vmax, cur)
             s = cur + prev
-            if s > moving_sum_mps:
-                moving += 1.0
+            moving += 1.0 if s > moving_sum_mps else 0.0
             vm = s * 0.5
             inert = (cur - prev) * mdt
             force = vm * k_aero
@@ -122,8 +116,28 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
         o[8], o[9] = moving, vmax
 
 
+def _uniforms_kernel(k, counts, start, u):  # pragma: no cover (compiled)
+    """Uniforms of :func:`~hybridev.physics.kinematics.keyed_normals_ragged` before ``ndtri``.
+
+    ``k`` (n,) uint64 is the splitmix64 hash of each key with the seed; draw
+    ``c`` of key ``i`` goes to ``u[start[i] + c]``. Integer arithmetic modulo
+    2**64 and an exact conversion of 53 bits: the same numbers as numpy's.
+    """
+    gold = np.uint64(0x9E3779B97F4A7C15)
+    m1 = np.uint64(0xBF58476D1CE4E5B9)
+    m2 = np.uint64(0x94D049BB133111EB)
+    for i in range(k.shape[0]):
+        x0 = k[i] + gold
+        for c in range(counts[i]):
+            x = x0 + np.uint64(c) * gold
+            x = (x ^ (x >> np.uint64(30))) * m1
+            x = (x ^ (x >> np.uint64(27))) * m2
+            x = x ^ (x >> np.uint64(31))
+            u[start[i] + c] = (np.float64(x >> np.uint64(11)) + 0.5) * 2.0**-53
+
+
 def _kernel():
-    """The compiled kernel, or None (numba missing, or ``HYBRIDEV_NO_NUMBA=1``)."""
+    """The compiled kernels ``(trips, uniforms)``, or None (no numba, or ``HYBRIDEV_NO_NUMBA=1``)."""
     global _compiled
     if os.environ.get(_ENV, "") not in ("", "0"):
         return None
@@ -133,8 +147,28 @@ def _kernel():
         except ImportError:  # optional at run time: the numpy path is used
             _compiled = False
         else:
-            _compiled = numba.njit(cache=True, nogil=True)(_trips_kernel)
+            jit = numba.njit(cache=True, nogil=True)
+            _compiled = (jit(_trips_kernel), jit(_uniforms_kernel))
     return _compiled or None
+
+
+def _ragged_normals(seed: int, keys: np.ndarray, counts: np.ndarray, uniforms
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~hybridev.physics.kinematics.keyed_normals_ragged` with the hashing compiled."""
+    if uniforms is None:
+        return keyed_normals_ragged(seed, keys, counts)
+    from scipy.special import ndtri
+
+    from hybridev.physics.kinematics import _splitmix64
+
+    start = np.zeros(len(counts), dtype=np.int64)
+    np.cumsum(counts[:-1], out=start[1:])
+    with np.errstate(over="ignore"):
+        s = _splitmix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) + np.zeros(1, np.uint64))
+        k = _splitmix64(keys.astype(np.uint64) ^ s)
+    u = np.empty(int(counts.sum()))
+    uniforms(k, counts, start, u)
+    return ndtri(u, out=u), start
 
 
 def fused_available() -> bool:
@@ -163,9 +197,9 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         Checked synthesis settings (as :func:`hybridev.synthesize_speed_trace`).
     vehicle : VehicleParams
         Fixes the sign split.
-    kernel : callable, optional
-        The kernel to run (default: the compiled one); tests pass the plain
-        Python function.
+    kernel : tuple of callables, optional
+        The kernels ``(trips, uniforms)`` to run (default: the compiled ones);
+        tests pass the plain Python functions (``uniforms`` None: numpy).
 
     Returns
     -------
@@ -178,6 +212,7 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     kern = kernel or _kernel()
     if kern is None:
         return None
+    kern, uniforms = kern
     from hybridev.physics.forces import MOVING_MPS
     from hybridev.physics.kinematics import _keys
     from hybridev.physics.stats import _J_PER_KWH
@@ -203,7 +238,7 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     h0 = np.minimum(h_pke, np.minimum(0.7 * a_cap, 0.8 * vb_mps / w))
     cv = prof["amplitude_cv"]
     sig = np.sqrt(np.log1p(cv**2))
-    z, z_start = keyed_normals_ragged(seed, _keys(keys, n), n_cyc)
+    z, z_start = _ragged_normals(seed, _keys(keys, n), n_cyc, uniforms)
     veh = vehicle
     m, g = veh.mass_kg, veh.gravity_mps2
     th = np.broadcast_to(np.asarray(grade_rad, dtype=float), (n,))

@@ -63,7 +63,7 @@ def test_python_kernel_equals_numpy_path(trips, monkeypatch):
     """The kernel's source, run as plain Python (what numba compiles), on a few trips."""
     t = trips.iloc[:6]
     a = _stats(t, monkeypatch, False, n_steps=40)
-    monkeypatch.setattr(_kernel, "_kernel", lambda: _kernel._trips_kernel)
+    monkeypatch.setattr(_kernel, "_kernel", lambda: (_kernel._trips_kernel, None))
     b = trip_stats(t, n_steps=40)
     _assert_close(a, b)
 
@@ -85,6 +85,24 @@ def test_ragged_normals_are_keyed_normals_without_the_padding():
     assert z.shape == (9,) and start.tolist() == [0, 3, 3]
     for i, c in enumerate(counts):
         assert np.array_equal(z[start[i]:start[i] + c], full[i, :c])
+
+
+@needs_numba
+def test_compiled_uniforms_equal_numpy_draws():
+    keys = np.array([5, 2**64 - 1, 0, 77], dtype=np.uint64)
+    counts = np.array([3, 0, 125, 1], dtype=np.int64)
+    a = keyed_normals_ragged(2**63 - 1, keys, counts)
+    b = _kernel._ragged_normals(2**63 - 1, keys, counts, _kernel._kernel()[1])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_python_uniforms_equal_numpy_draws():
+    keys = np.array([5, 2**64 - 1], dtype=np.uint64)
+    counts = np.array([4, 2], dtype=np.int64)
+    a = keyed_normals_ragged(3, keys, counts)
+    with np.errstate(over="ignore"):  # numpy scalars warn on the intended wrap-around
+        b = _kernel._ragged_normals(3, keys, counts, _kernel._uniforms_kernel)
+    assert np.array_equal(a[0], b[0])
 
 
 def test_disabled_by_environment(monkeypatch):
