@@ -30,9 +30,9 @@ if "numpy" in sys.modules:
                   "setting may not apply", RuntimeWarning, stacklevel=2)
 
 import argparse  # noqa: E402
-import resource  # noqa: E402
 import datetime as _dt  # noqa: E402
 import platform  # noqa: E402
+import resource  # noqa: E402
 import time  # noqa: E402
 import zipfile  # noqa: E402
 from collections.abc import Callable, Iterable, Mapping, Sequence  # noqa: E402
@@ -43,9 +43,9 @@ from typing import TypeVar  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["RESULTS", "ROOT", "THREADS_NOTE", "clock", "cpu_model", "iqr", "load_average",
-           "machine_section", "run_times", "markdown_table", "median_iqr", "npz_entry_sizes", "paper_split",
-           "parse_args", "pin_one_core", "show_path", "timed", "timed_cpu", "verdict",
-           "write_result"]
+           "machine_section", "markdown_table", "median_iqr", "npz_entry_sizes", "paper_split",
+           "parse_args", "pin_one_core", "run_times", "show_path", "timed", "timed_cpu",
+           "verdict", "write_result"]
 
 _START = (time.perf_counter(), time.process_time())  # the run's clocks, from this import
 ROOT = Path(__file__).resolve().parents[1]
