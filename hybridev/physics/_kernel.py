@@ -31,18 +31,19 @@ from hybridev.physics.kinematics import MIN_STEPS_PER_CYCLE, keyed_normals_ragge
 
 __all__ = ["N_ACC", "fused_available", "synthetic_sums"]
 
-N_ACC = 10
+N_ACC = 11
 """Per-trip accumulators of the kernel: the moments ``[v, v^2, v^3, m a v]`` over
-driving intervals, the same over braking ones, the moving intervals and the top
-speed. One more per-interval statistic is one more column of ``out`` here."""
+driving intervals, the same over (uncapped) braking ones, the moving intervals,
+the top speed and the braking intervals at the regen limit. One more per-interval
+statistic is one more column of ``out`` here."""
 
 _ENV = "HYBRIDEV_NO_NUMBA"
 _compiled = None  # the jitted kernel, or False when numba cannot be imported
 
 
 def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2, h_hi, w,
-                  vb, d_m, duration, dt, m_over_dt, grade_force, z, z_start, n_steps,
-                  k_aero, lin_n_per_mps, moving_sum_mps, out):  # pragma: no cover (compiled)
+                  vb, d_m, duration, dt, m_over_dt, grade_force, brake_limit_w, z, z_start,
+                  n_steps, k_aero, lin_n_per_mps, moving_sum_mps, out):  # pragma: no cover
     """Synthesise each trip's trace and accumulate its sums into ``out`` (n, N_ACC).
 
     Same arithmetic, operation by operation, as ``synthesize_speed_trace``
@@ -78,9 +79,9 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
         swing_dist = (total - 0.5 * (v[0] + v[n_steps])) * dt[i]
         floor = base + (d_m[i] - base * duration[i] - swing_dist) / duration[i]
         # force sums over the intervals, split by the sign of the wheel force
-        mdt, gf = m_over_dt[i], grade_force[i]
+        mdt, gf, lim = m_over_dt[i], grade_force[i], -brake_limit_w[i]
         p0 = p2 = p3 = p4 = q0 = q2 = q3 = q4 = 0.0
-        moving = 0.0
+        moving = capped = 0.0
         prev = max(v[0] + floor, 0.0)
         vmax = prev
         for k in range(1, n_steps + 1):
@@ -104,6 +105,8 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
                 p2 += v2
                 p3 += v3
                 p4 += iv
+            elif force * vm < lim:  # braking power beyond the regen limit: only its time
+                capped += 1.0
             else:
                 q0 += vm
                 q2 += v2
@@ -113,7 +116,7 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
         o = out[i]
         o[0], o[1], o[2], o[3] = p0, p2, p3, p4
         o[4], o[5], o[6], o[7] = q0, q2, q3, q4
-        o[8], o[9] = moving, vmax
+        o[8], o[9], o[10] = moving, vmax, capped
 
 
 def _uniforms_kernel(k, counts, start, u):  # pragma: no cover (compiled)
@@ -181,7 +184,7 @@ _PROFILE_FIELDS = ("max_accel_mps2", "pke_mps2", "cycle_period_s", "amplitude_cv
 
 
 def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_rad,
-                   n_steps: int, seed: int, vehicle, *, kernel=None):
+                   n_steps: int, seed: int, vehicle, *, brake_limit_w=None, kernel=None):
     """Force sums of the synthetic traces of trips, without forming the traces.
 
     Parameters
@@ -197,6 +200,9 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         Checked synthesis settings (as :func:`hybridev.synthesize_speed_trace`).
     vehicle : VehicleParams
         Fixes the sign split.
+    brake_limit_w : numpy.ndarray, shape (n,), W, optional
+        Braking wheel power beyond which regeneration runs at its limit
+        (``stats_build._regen_threshold``); ``inf`` or None: no limit.
     kernel : tuple of callables, optional
         The kernels ``(trips, uniforms)`` to run (default: the compiled ones);
         tests pass the plain Python functions (``uniforms`` None: numpy).
@@ -204,10 +210,11 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     Returns
     -------
     tuple or None
-        ``(sums_pos, sums_neg, duration_s, moving_s, max_speed_kmh)``, the
-        sums as lists ``[roll, aero, lin, rest]`` of arrays (n,) in kWh as
-        ``_trace_sums`` returns them; None when the compiled kernel is
-        unavailable.
+        ``(sums_pos, sums_neg, duration_s, moving_s, max_speed_kmh, capped_s)``,
+        the sums as lists ``[roll, aero, lin, rest]`` of arrays (n,) in kWh as
+        ``_trace_sums`` returns them (braking sums without the intervals at the
+        regen limit, whose time is ``capped_s``); None when the compiled kernel
+        is unavailable.
     """
     kern = kernel or _kernel()
     if kern is None:
@@ -243,10 +250,12 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     m, g = veh.mass_kg, veh.gravity_mps2
     th = np.broadcast_to(np.asarray(grade_rad, dtype=float), (n,))
     cos_th, sin_th = np.cos(th), np.sin(th)
+    limit = (np.full(n, np.inf) if brake_limit_w is None
+             else np.broadcast_to(np.asarray(brake_limit_w, dtype=float), (n,)))
     out = np.empty((n, N_ACC))
     kern(n_cyc / n_steps, 1.0 / fa, 1.0 - fb, 1.0 / fb, n_cyc, h0, sig, 0.5 * sig**2,
          np.minimum(h_cap, 2.0 * h0), w, vb_mps, d * 1000.0, duration, dt, m / dt,
-         (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th, z, z_start,
+         (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th, limit, z, z_start,
          int(n_steps), 0.5 * veh.air_density_kg_m3 * veh.drag_area_m2,
          float(veh.linear_drag_n_per_mps), 2.0 * MOVING_MPS, out)
     cst = dt / _J_PER_KWH
@@ -257,4 +266,4 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         aero = (0.5 * veh.air_density_kg_m3) * s3 * cst
         lin = s2 * cst
         sums.append([roll, aero, lin, rest_grade + s4 * cst])
-    return sums[0], sums[1], dt * n_steps, out[:, 8] * dt, out[:, 9] * 3.6
+    return sums[0], sums[1], dt * n_steps, out[:, 8] * dt, out[:, 9] * 3.6, out[:, 10] * dt

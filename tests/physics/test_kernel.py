@@ -10,7 +10,8 @@ from hybridev.physics.kinematics import keyed_normals, keyed_normals_ragged
 from hybridev.physics.stats import _SUMS
 
 COLUMNS = [f"{c}_{s}" for c in _SUMS for s in ("pos", "neg")] + [
-    "duration_h", "moving_h", "max_speed_kmh", "hvac_kw", "warmup_kwh", "mult", "eta_r"]
+    "duration_h", "moving_h", "max_speed_kmh", "hvac_kw", "warmup_kwh", "mult", "eta_r",
+    "regen_capped_kwh", "regen_capped_h"]
 
 needs_numba = pytest.mark.skipif(not _kernel.fused_available(),
                                  reason="numba not installed (the numpy path is the only one)")
@@ -23,6 +24,7 @@ def trips():
     t["grade_pct"] = np.random.default_rng(0).uniform(-6.0, 6.0, len(t))
     t.loc[t.index[:3], "distance_km"] = [0.4, 300.0, 2.0]  # one cycle; many; short
     t.loc[t.index[:3], "avg_speed_kmh"] = [8.0, 130.0, 15.0]
+    t.loc[t.index[3:6], "soc_initial"] = [1.0, np.nan, 0.97]  # no regen; unknown; derated
     return t
 
 
@@ -41,12 +43,15 @@ def _assert_close(a, b, rtol=1e-9):
 @needs_numba
 @pytest.mark.parametrize("vehicle", [VehicleParams(),
                                      VehicleParams(climate_model="continuous",
-                                                   linear_drag_n_per_mps=3.0)])
+                                                   linear_drag_n_per_mps=3.0),
+                                     VehicleParams(regen_max_kw=15.0)])
 @pytest.mark.parametrize("n_steps", [1000, 57])
 def test_compiled_equals_numpy_path(trips, monkeypatch, vehicle, n_steps):
     a = _stats(trips, monkeypatch, False, vehicle=vehicle, n_steps=n_steps, seed=4)
     b = _stats(trips, monkeypatch, True, vehicle=vehicle, n_steps=n_steps, seed=4)
     assert a.n_rows == b.n_rows > len(trips)
+    if vehicle.regen_max_kw is not None:  # some braking at the limit, some derated by SoC
+        assert 0 < np.count_nonzero(a.regen_capped_h) < a.n_rows
     _assert_close(a, b)
 
 
