@@ -32,6 +32,7 @@ if "numpy" in sys.modules:
 import argparse  # noqa: E402
 import datetime as _dt  # noqa: E402
 import platform  # noqa: E402
+import resource  # noqa: E402
 import time  # noqa: E402
 import zipfile  # noqa: E402
 from collections.abc import Callable, Iterable, Mapping, Sequence  # noqa: E402
@@ -43,9 +44,10 @@ import numpy as np  # noqa: E402
 
 __all__ = ["RESULTS", "ROOT", "THREADS_NOTE", "clock", "cpu_model", "iqr", "load_average",
            "machine_section", "markdown_table", "median_iqr", "npz_entry_sizes", "paper_split",
-           "parse_args", "pin_one_core", "show_path", "timed", "timed_cpu", "verdict",
-           "write_result"]
+           "parse_args", "pin_one_core", "run_times", "show_path", "timed", "timed_cpu",
+           "verdict", "write_result"]
 
+_START = (time.perf_counter(), time.process_time())  # the run's clocks, from this import
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 T = TypeVar("T")
@@ -158,6 +160,22 @@ def load_average() -> tuple[float, float, float]:
     return os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
 
 
+def run_times() -> dict[str, float]:
+    """Wall and CPU seconds of this run so far (since ``_common`` was imported).
+
+    ``cpu_self_s`` is this process's user + system time
+    (:func:`time.process_time`), ``cpu_children_s`` that of its finished,
+    waited-for child processes (``resource.getrusage(RUSAGE_CHILDREN)``: worker
+    processes count once their cluster is closed). On an idle core a
+    single-threaded run has ``cpu_self_s`` close to ``wall_s``; a much smaller
+    ratio means other jobs took the core, and the wall times are inflated.
+    """
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return {"wall_s": time.perf_counter() - _START[0],
+            "cpu_self_s": time.process_time() - _START[1],
+            "cpu_children_s": ch.ru_utime + ch.ru_stime}
+
+
 def machine_section(*, load: Sequence[float], cores: str, threads: str = THREADS_NOTE,
                     modules: Iterable[ModuleType] = (),
                     times: str = "times") -> str:
@@ -178,6 +196,8 @@ def machine_section(*, load: Sequence[float], cores: str, threads: str = THREADS
     """
     import hybridev
 
+    run = run_times()
+    end = load_average()
     mods = list(modules)
     names = " / ".join(m.__name__ for m in mods)
     versions = " / ".join(str(m.__version__) for m in mods)
@@ -188,6 +208,11 @@ def machine_section(*, load: Sequence[float], cores: str, threads: str = THREADS
         ("load average at start (1/5/15 min)",
          f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (shared machine: other jobs may "
          f"inflate {times})"),
+        ("load average at end (1/5/15 min)", f"{end[0]:.2f} / {end[1]:.2f} / {end[2]:.2f}"),
+        ("whole run: wall / CPU time",
+         f"{run['wall_s']:.1f} s wall; CPU {run['cpu_self_s']:.1f} s in this process "
+         f"({run['cpu_self_s'] / max(run['wall_s'], 1e-9):.0%} of wall) + "
+         f"{run['cpu_children_s']:.1f} s in child processes"),
         ("Python", f"{platform.python_version()} ({platform.python_implementation()})"),
         *([(names, versions)] if mods else []),
         ("hybridev", hybridev.__version__),

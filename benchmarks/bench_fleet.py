@@ -27,8 +27,10 @@ Sections:
    ones, flags against the planted outliers);
 5. a profile (cProfile) of one partition's ``predict_interval``.
 
-Targets (issue 14): >= 70 % parallel efficiency at 2 cores, >= 20,000 trips/s
-per core with intervals.
+Targets (issue 34; issue 14 asked for 70 % and 20,000): >= 80 % parallel
+efficiency at 2 cores, >= 50,000 trips/s per core with intervals. Per core is
+read from the worker CPU time (trips per CPU second of the one worker) beside
+the wall-clock figure: on a shared machine other jobs stretch the wall time.
 """
 
 from __future__ import annotations
@@ -165,6 +167,7 @@ def main(argv=None) -> int:
         eff = tput[2][1] / (2 * tput[1][1])
         per_core = tput[1][1]
         cpu_core = n_thr / CPU[(1, str(src))]
+        eff_cpu = (n_thr / CPU[(2, str(src))]) / cpu_core  # CPU work per trip, 2 vs 1 worker
 
         # 2. memory vs partition size and vs data size -------------------------------
         mem_part = []
@@ -238,12 +241,13 @@ def main(argv=None) -> int:
         "least disturbed by the other jobs on the machine: trips per CPU second is the "
         "per-core throughput the machine gives when a core is ours.", "",
         bench.markdown_table(["target", "value"], [
-            ["parallel efficiency at 2 cores >= 70 %",
-             f"{100 * eff:.0f} %: **{'met' if eff >= 0.7 else 'not met'}**"],
-            [">= 20,000 trips/s per core with intervals",
+            ["parallel efficiency at 2 cores >= 80 %",
+             f"{100 * eff:.0f} % (wall); {100 * eff_cpu:.0f} % in trips per CPU second: "
+             f"**{'met' if eff >= 0.8 else 'not met'}** on wall time"],
+            [">= 50,000 trips/s per core with intervals",
              f"{per_core:,.0f} trips/s on 1 worker (wall); {cpu_core:,.0f} per CPU second: "
-             f"**{'met' if per_core >= 20_000 else 'not met'}**"
-             f"{'' if per_core >= 20_000 else ' on wall time'}"]]), "",
+             f"**{'met' if per_core >= 50_000 else 'not met'}** on wall time, "
+             f"**{'met' if cpu_core >= 50_000 else 'not met'}** per CPU second"]]), "",
         "## 2. Peak memory per worker", "",
         "Peak resident set (`ru_maxrss`) of the larger worker after the warm-up (imports, "
         "model) and after the run; the difference is what scoring needed.", "",

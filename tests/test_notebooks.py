@@ -36,7 +36,9 @@ EXPECTED = (
     "04_range_and_charging.ipynb",
 )
 NOTEBOOKS = sorted(p.name for p in NB_DIR.glob("*.ipynb"))
-SLOW: set[str] = set()  # all four run in the default suite (about 70 s together)
+SLOW = {"02_reproducing_the_paper.ipynb", "03_calibration_from_measured_trips.ipynb"}
+"""Notebooks run with ``-m slow`` only: 02 (four fits) and 03 (two MCMC runs, a fit and
+an HTML report); 01 and 04 (one small fit each) run in the default suite."""
 KERNEL_NAME = "hybridev-test-python"
 
 

@@ -10,9 +10,9 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
-import scoringrules as sr
 
 from hybridev.core.checks import _bounds, _float, _levels, _y
+from hybridev.metrics._scoringrules import sr
 from hybridev.metrics.point import mae, mape, rmse
 
 __all__ = [

@@ -4,11 +4,11 @@ for Gaussians, Gaussian mixtures and samples."""
 from __future__ import annotations
 
 import numpy as np
-import scoringrules as sr
 from scipy import stats
 from scipy.special import logsumexp
 
 from hybridev.core.checks import _float, _like, _mixture, _positive, _y
+from hybridev.metrics._scoringrules import sr
 
 __all__ = [
     "crps_gaussian",

@@ -44,6 +44,7 @@ __all__ = [
     "MIN_STEPS_PER_CYCLE",
     "content_keys",
     "keyed_normals",
+    "keyed_normals_ragged",
     "positive_kinetic_energy",
     "profile_table",
     "synthesize_speed_trace",
@@ -163,6 +164,44 @@ def keyed_normals(seed: int, keys: np.ndarray, n_cols: int) -> np.ndarray:
         x = _splitmix64(k + np.arange(n_cols, dtype=np.uint64)[None, :] * _GOLDEN)
     u = ((x >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
     return ndtri(u)
+
+
+def keyed_normals_ragged(seed: int, keys: np.ndarray, counts: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``counts[i]`` columns of :func:`keyed_normals` for each key, stored flat.
+
+    Parameters
+    ----------
+    seed : int
+    keys : numpy.ndarray, shape (n,), uint64
+    counts : numpy.ndarray, shape (n,), int
+        Draws wanted per key (>= 0).
+
+    Returns
+    -------
+    z : numpy.ndarray, shape (counts.sum(),)
+        The draws of key ``i`` are ``z[start[i]:start[i] + counts[i]]``, equal
+        to ``keyed_normals(seed, keys, n_cols)[i, :counts[i]]`` for any
+        ``n_cols >= counts[i]``: no draw is made that is not used.
+    start : numpy.ndarray, shape (n,), int64
+
+    Examples
+    --------
+    >>> k = np.array([3, 9], dtype=np.uint64)
+    >>> z, start = keyed_normals_ragged(1, k, np.array([2, 4]))
+    >>> bool(np.array_equal(z[start[1]:], keyed_normals(1, k, 4)[1]))
+    True
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    start = np.zeros(len(counts), dtype=np.int64)
+    np.cumsum(counts[:-1], out=start[1:])
+    col = np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(start, counts)
+    with np.errstate(over="ignore"):
+        s = _splitmix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) + np.zeros(1, np.uint64))
+        k = _splitmix64(keys.astype(np.uint64) ^ s)
+        x = _splitmix64(np.repeat(k, counts) + col.astype(np.uint64) * _GOLDEN)
+    u = ((x >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+    return ndtri(u), start
 
 
 _MAX_STEPS = 1_000_000

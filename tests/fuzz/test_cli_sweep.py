@@ -5,10 +5,14 @@ inputs and asserts: no exception escapes, the exit code is 0 or 2, no
 traceback is printed, no file of the folder is lost or changed (except a
 regular file the case itself named as the output of a successful run, which is
 what ``--out FILE`` means), no temporary file is left behind, and a failed run
-writes no file. The default run draws 10 cases; the slow test draws 500.
+writes no file. Both sweeps are slow tests (``-m slow``): 10 cases, and 500.
+A ``demo`` case runs on 200 generated trips instead of the CLI's 1,500 (the sweep
+checks the command's handling of its arguments and files, which does not depend
+on the data's size; ``tests/apps/test_demo.py`` checks the full-size output).
 """
 
 import contextlib
+import functools
 import io
 import shutil
 from collections import Counter
@@ -17,6 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import hybridev.apps.demo
 from hybridev.cli.main import main
 from hybridev.core.owned import REGISTER_FILE
 
@@ -25,6 +30,7 @@ from .test_cli_odd import _bad_tables
 
 FIT = ["--max-epochs", "2", "--n-steps", "60", "--quiet", "--members", "2"]
 BAD = ["nan", "inf", "bool", "text", "huge", "dup", "header_only"]
+DEMO_TRIPS = 200
 
 
 @pytest.fixture(scope="module")
@@ -124,6 +130,8 @@ def run_case(pool_dir, work, case, monkeypatch):
         shutil.rmtree(work)
     shutil.copytree(pool_dir, work)
     monkeypatch.chdir(work)
+    monkeypatch.setattr(hybridev.apps.demo, "run_demo",
+                        functools.partial(hybridev.apps.demo.run_demo, n_trips=DEMO_TRIPS))
     before = snapshot(work)
     err, out = io.StringIO(), io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
@@ -156,6 +164,7 @@ def _sweep(pool, tmp_path, monkeypatch, cases):
     return tally
 
 
+@pytest.mark.slow
 def test_cli_sweep_quick(pool, tmp_path, monkeypatch):
     tally = _sweep(pool, tmp_path, monkeypatch, range(10))
     assert sum(tally.values()) == 10
