@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 _CLI = re.compile(r"^<!-- cli-reference -->$", re.M)
 _API = re.compile(r"^<!-- api: (hybridev(?:\.\w+)*) -->$", re.M)
 _FENCE = re.compile(r"^(```|~~~).*?^\1[ \t]*$", re.M | re.S)
-_DISPLAY = re.compile(r"^\$\$\n(.+?)\n\$\$$", re.M | re.S)
+_DISPLAY = re.compile(r"^([ \t]*)\$\$\n(.+?)\n[ \t]*\$\$$", re.M | re.S)
 _INLINE = re.compile(r"\\\((.+?)\\\)")
 _CODE_SPAN = re.compile(r"`[^`\n]+`")
 
@@ -68,11 +68,12 @@ def api_blocks(package: str) -> str:
 def _math(text: str) -> str:
     from latex2mathml.converter import convert
 
-    def display(m):
-        return "\n" + convert(m.group(1).strip(), display="block") + "\n"
+    def display(m):  # one line, at the block's indent (inside a list item too)
+        tex = " ".join(m.group(2).split())
+        return m.group(1) + convert(tex, display="block").replace("\n", "")
 
-    def inline(m):
-        return convert(html.unescape(m.group(1)))
+    def inline(m):  # in a span: Markdown takes a line starting with <math> for a block
+        return f'<span class="math">{convert(html.unescape(m.group(1)))}</span>'.replace("\n", "")
 
     out, pos = [], 0
     for fence in _FENCE.finditer(text):  # leave code blocks alone

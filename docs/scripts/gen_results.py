@@ -69,9 +69,9 @@ def _links(text: str, study: str) -> str:
         path = re.sub(r"[^/]+/\.\./", "", re.sub(r"[^/]+/\.\./", "", path))
         return f"{label} (`{path}`)" if label.strip("`") != target else f"`{path}`"
 
-    text = re.sub(r"!\[([^\]]*)\]\(([^)\s]+)\)",
+    text = re.sub(r"!\[([^\]\[\n]*)\]\(([^)\s]+)\)",
                   lambda m: "!" + fix(m) if m.group(2).startswith("figures/") else fix(m), text)
-    return re.sub(r"(?<!!)\[([^\]]*)\]\(([^)\s]+)\)", fix, text)
+    return re.sub(r"(?<!!)\[([^\]\[\n]*)\]\(([^)\s]+)\)", fix, text)
 
 
 def _demote(text: str) -> str:
