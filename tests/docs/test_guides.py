@@ -1,10 +1,12 @@
-"""Every code block of the get-started and how-to pages runs, as written, in order.
+"""Every code block of the README, the get-started and the how-to pages runs, in order.
 
 A page becomes one bash script (:func:`page_script`): its ```bash blocks verbatim, and
 each run of consecutive ```python blocks as one ``python`` process (so a later block
 sees an earlier one's variables), with ``hybridev`` on the PATH from this source tree
 and ``TMPDIR`` inside the test's temporary folder (so ``cd "$(mktemp -d)"`` lands
-there and nothing is left behind). Blocks in other languages (``text``) are not run.
+there and nothing is left behind). Blocks in other languages are not run: ``text``
+(output, diagrams) and ``sh``, kept for the installation commands, which must not run
+here (they create environments and download packages).
 
 * Default suite: the model fits are made small (:data:`FAST`: 2 networks, 15 epochs),
   which changes the numbers, not the commands; every substitution must match.
@@ -25,7 +27,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
-PAGES = ("get-started/first-prediction.md", "get-started/your-own-car.md", "how-to/range.md",
+PAGES = ("../README.md", "get-started/first-prediction.md", "get-started/your-own-car.md", "how-to/range.md",
          "how-to/charging.md", "how-to/report.md")
 SLOW_PAGES = ("how-to/fleet.md",)
 FAST = (  # (pattern, replacement): smaller fits for the default suite
@@ -88,7 +90,9 @@ def test_every_page_has_runnable_blocks_and_fast_substitutions_match():
     for page in (*PAGES, *SLOW_PAGES):
         langs = {lang for lang, _ in blocks(page)}
         assert langs & {"bash", "python"}, page
-        assert langs <= {"bash", "python", "text"}, (page, langs)
+        assert langs <= {"bash", "python", "text", "sh"}, (page, langs)
+        sh = [code for lang, code in blocks(page) if lang == "sh"]
+        assert all("pip install" in code for code in sh), (page, "sh is for installation only")
     script = "\n".join(page_script(p) for p in (*PAGES, *SLOW_PAGES))
     for pattern, _ in FAST:
         assert re.search(pattern, script, flags=re.M), pattern

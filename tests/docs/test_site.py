@@ -36,6 +36,24 @@ def test_results_pages_are_current():
     assert f"{h['mape']['hybrid']:.2f} %" in index and f"{h['mape']['nnls_stats']:.2f} %" in index
 
 
+def test_readme_quotes_the_committed_results():
+    """The README's headline figures are the results pages' (from committed outputs)."""
+    import gen_results
+
+    readme = (ROOT / "README.md").read_text()
+    h = gen_results.headline()
+    for key in ("hybrid", "nnls_stats", "linreg_summary", "median_kwh_per_km",
+                "nominal_physics"):
+        assert f"| {h['mape'][key]:.2f} % |" in readme, key
+    for size, v in h["coverage"].items():
+        assert f"| {v['coverage']:.3f} | {100 * v['rel_width']:.0f} % of the energy |" in readme
+    r = h["risk"]
+    assert f"{100 * r['mean']:.1f} % ± {100 * r['se']:.1f} %" in readme
+    assert f"did {100 * h['risk_neutral']:.0f} % of the time" in readme
+    assert len(readme.splitlines()) <= 150
+    assert "issue" not in readme.lower()
+
+
 def test_every_evaluation_study_is_on_a_results_page():
     """evaluation/ keeps only the studies whose figures the docs quote."""
     import gen_results
