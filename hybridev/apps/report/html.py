@@ -135,9 +135,9 @@ def _consumption_card(s: dict) -> str:
                     f"{r0['distance_km']:g} km at {r0['avg_speed_kmh']:g} km/h</span></td>"
                     f"{''.join(tds)}</tr>")
     lv = s["level"]
-    star_note = (" *: outside the conditions of the training trips, so the interval is "
-                 "widened (the physics posterior's spread): log trips in such weather or at "
-                 "such speeds to narrow it." if starred else "")
+    star_note = (" *: unlike the training trips (weather, speed or length outside theirs, "
+                 "or no logged speed trace where the model was trained on traces), so the "
+                 "interval is widened: the physics posterior's spread." if starred else "")
     return (f"<div class='scroll'><table><thead><tr><th>kWh/100 km</th>{head}</tr></thead>"
             f"<tbody>{''.join(body)}</tbody></table></div><p class='small'>Predicted by the "
             f"hybrid, with its {T.level_text(lv)} interval, for a flat trip starting at 80 % state of "
