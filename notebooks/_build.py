@@ -630,7 +630,7 @@ CALIBRATION = [
     table = measured.drop(columns=["energy_kwh_true"]).assign(
         session_group=measured["trip_id"] // 10).astype(object)
     table.loc[3, "distance_km"] = -12.0                 # negative distance
-    table.loc[7, "temperature_c"] = 85.0                # outside [-50, 60] degC
+    table.loc[7, "temperature_c"] = 85.0                # outside [-50, 60] °C
     table.loc[11, "avg_speed_kmh"] = "fast"             # not a number
     table.loc[15, "energy_kwh"] = -1.2                  # negative energy
     table.loc[19, "mode"] = "sporty"                    # unknown driving profile
@@ -800,8 +800,8 @@ RANGE = [
     from hybridev.apps.demo import example_schedule, example_tariff
     from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 
-    # The example week's temperatures (about -5 to 10 degC) lie between the training design
-    # points (-5, 20, 32 degC): the model flags those trips (in_domain, domain_score) and
+    # The example week's temperatures (about -5 to 10 °C) lie between the training design
+    # points (-5, 20, 32 °C): the model flags those trips (in_domain, domain_score) and
     # widens their spread. The OutOfDomainWarning would repeat on every call (notebook 01
     # shows it), so it is silenced here; the in_domain column says which trips it concerns.
     warnings.simplefilter("ignore", OutOfDomainWarning)

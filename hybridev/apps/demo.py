@@ -197,7 +197,9 @@ def _figures(out_dir: Path, test: pd.DataFrame, pred: pd.DataFrame, fan: pd.Data
     ax.set(xlabel="hours from Monday 00:00", ylabel="state of charge",
            title="Risk-aware charging plan for one week")
     ax2.set_ylabel("charger power (kW)")
-    ax.legend(loc="lower left", fontsize=8)
+    h1, l1 = ax.get_legend_handles_labels()  # one legend for both axes: the bars too
+    h2, l2 = ax2.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, loc="lower left", fontsize=8)
     names.append(_save(fig, out_dir / "charging_plan.png"))
     return names
 

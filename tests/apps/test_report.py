@@ -104,7 +104,7 @@ def test_every_rejected_row_is_listed_with_reason(run):
     section = text.split(f"Rejected rows ({len(BAD)})", 1)[1]
     for r in s["rejected"]:
         assert r["reason"] and r["reason"] in html.unescape(section)
-        assert f"<td>{r['trip_id']}</td>" in section
+        assert f">{r['trip_id']}</td>" in section
     on_disk = pd.read_csv(run["out"] / "rejected.csv")
     assert sorted(on_disk["trip_id"]) == sorted(BAD)
     assert {"row", "field", "value", "reason"} <= set(on_disk.columns)
@@ -350,3 +350,72 @@ def test_predictions_carry_the_parking_time(run):
     p = pd.read_csv(run["out"] / "predictions.csv")
     assert "parked_min" in p.columns
     assert (p["parked_min"].dropna() >= 0).all() and p["parked_min"].notna().any()
+
+
+def test_summary_card_comes_first_and_answers_the_three_questions(run):
+    """Consumption at 20 °C and 0 °C, held-out accuracy in words, calibration, warnings."""
+    text = html.unescape((run["out"] / "report.html").read_text(encoding="utf-8"))
+    card, detail = text.index("<h2>Summary</h2>"), text.index("<h2>Held-out accuracy</h2>")
+    assert card < detail and text.index("<table") > card
+    head = run["summary"]["headline"]
+    ref = head["reference_consumption"]
+    assert {(r["trip"], r["temperature_c"]) for r in ref} == {
+        (t, c) for t in ("city", "highway") for c in (20.0, 0.0)}
+    for r in ref:
+        assert r["kwh_per_100km_lo"] <= r["kwh_per_100km"] <= r["kwh_per_100km_hi"]
+        assert f"<b>{r['kwh_per_100km']:.1f}</b>" in text[card:detail]
+    assert "20 °C" in text[card:detail] and "0 °C" in text[card:detail]
+    p = pd.read_csv(run["out"] / "predictions.csv")
+    err = np.abs(p["energy_kwh_pred"] / p["energy_kwh"] - 1) * 100
+    assert head["accuracy"]["p90_abs_error_pct"] == pytest.approx(np.quantile(err, 0.9))
+    assert "on 9 trips in 10" in head["accuracy"]["text"] and head["accuracy"]["text"] in text
+    cal = head["calibration"]
+    assert cal["verdict"] in ("calibrated", "too narrow", "too wide", "unbounded")
+    assert cal["text"] in text[card:detail]
+    assert f"What looks wrong ({len(head['warnings'])})" in text
+    assert f"{len(BAD)} input row(s) were rejected" in " ".join(head["warnings"])
+    for w in head["warnings"]:
+        assert w in text[card:detail]
+
+
+def test_tables_scroll_inside_the_page_and_text_matches_table(run):
+    text = (run["out"] / "report.html").read_text(encoding="utf-8")
+    assert text.count("<table") == text.count("<div class='scroll'><table")
+    assert "overflow-x:auto" in text and 'name="viewport"' in text
+    h = run["summary"]["metrics"]["hybrid"]  # the sentence quotes the table's own figures
+    for v in (h["mape_pct"], h["mape_physics_part_pct"]):
+        assert f"{v:.1f} %" in text.split("<h2>Held-out accuracy</h2>", 1)[1].split(
+            "The hybrid's residual networks", 1)[0]
+    assert "degC" not in text and " C," not in text  # one way of writing units: °C
+
+
+def test_hard_bound_and_prior_warnings_are_sentences():
+    from hybridev.apps.report.card import warning_sentences
+
+    s = {"parameters": [
+        {"parameter": "regen_scale", "median": 1.3, "inside_prior": True, "hard_bound": 1.333,
+         "prior 99 % lo": 0.5, "prior 99 % hi": 1.33},
+        {"parameter": "aux_base_kw", "median": 5.0, "inside_prior": False, "hard_bound": None,
+         "prior 99 % lo": 0.1, "prior 99 % hi": 1.3}],
+        "diagnostics": {"converged": True, "warnings": [
+            "CalibrationWarning: physics posterior: aux_base_kw 5 (prior 99 % range 0.1-1.3): "
+            "outside. Possible reading, a constant extra load"]},
+        "data": {"n_rejected": 0}}
+    out = warning_sentences(s)
+    assert any("regen_scale presses against its hard bound (1.33" in w for w in out)
+    assert any("aux_base_kw (5) lies outside its prior's 99 % range (0.1 to 1.3)" in w
+               for w in out)
+    assert any(w == "A possible reading: a constant extra load." for w in out)
+    assert not any(w.startswith("While fitting: Physics posterior") for w in out)
+    assert warning_sentences({"parameters": [], "diagnostics": {}, "data": {}}) == []
+
+
+def test_no_plot_of_a_constant_and_posterior_panels(run):
+    pred = run["result"].predictions.assign(soc_initial=0.9)
+    fig = F.residual_figure(pred, ["distance_km", "soc_initial"])
+    labels = [ax.get_xlabel() for ax in fig.axes if ax.axison]
+    assert labels == ["distance (km)"]
+    post = run["result"].posterior
+    fig = F.posterior_prior_figure(post)
+    titled = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title().split("\n")[0] for ax in titled] == list(post.param_names)

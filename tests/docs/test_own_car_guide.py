@@ -4,12 +4,13 @@ Every ```bash block of the guide is run, in order, as one bash script with
 ``hybridev`` on the PATH (this interpreter, this source tree):
 
 * on the real M1 trips (``../shared/realtrips``, or ``$HYBRIDEV_REALTRIPS``)
-  when present: slow (about 90 s), skipped otherwise;
+  when present: slow, skipped otherwise;
 * on a small synthetic logger with the M1 logger's column names and no SoC,
   in the default suite, with fewer epochs and members (``--max-epochs 15
   --members 2`` appended to ``fit`` and ``calibrate``).
 
-Both check the outputs the guide promises: a saved model, predictions with
+The guide works in a folder of its own (``cd "$(mktemp -d)"``): both runs check
+that the folder it was started from stays empty, and the outputs the guide promises: a saved model, predictions with
 intervals, a finite, ordered range band, a charging plan and a report.
 """
 
@@ -37,7 +38,8 @@ def guide_script() -> str:
     return "set -euo pipefail\n" + "\n".join(blocks)
 
 
-def run_guide(workdir: Path, data: Path, script: str) -> str:
+def run_guide(workdir: Path, data: Path, script: str) -> tuple[Path, str]:
+    """Run the guide with ``TMPDIR`` in ``workdir``; returns the folder it worked in."""
     bin_dir = workdir / "bin"
     bin_dir.mkdir()
     shim = bin_dir / "hybridev"
@@ -45,11 +47,16 @@ def run_guide(workdir: Path, data: Path, script: str) -> str:
     shim.chmod(0o755)
     env = dict(os.environ, DATA=str(data), PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-               MPLBACKEND="Agg")
-    res = subprocess.run(["bash", "-c", script], cwd=workdir, env=env, capture_output=True,
+               MPLBACKEND="Agg", TMPDIR=str(workdir / "tmp"))
+    (workdir / "tmp").mkdir()
+    start = workdir / "start"  # where the user starts: must stay empty
+    start.mkdir()
+    res = subprocess.run(["bash", "-c", script], cwd=start, env=env, capture_output=True,
                          text=True, timeout=1200)
     assert res.returncode == 0, f"guide failed:\n{res.stdout}\n{res.stderr}"
-    return res.stdout
+    assert list(start.iterdir()) == [], "the guide left files where it was started"
+    (work,) = [p for p in (workdir / "tmp").iterdir() if (p / "m1-model").is_dir()]
+    return work, res.stdout
 
 
 def check_outputs(workdir: Path, stdout: str, n_trips: int) -> None:
@@ -100,8 +107,9 @@ def synthetic_logger(folder: Path, n_trips: int = 64) -> None:
     ts.to_parquet(folder / "timeseries_1hz.parquet", index=False)
 
 
-def test_guide_is_linked_from_readme():
+def test_guide_is_linked_from_readme_and_site():
     assert "docs/own_car.md" in (ROOT / "README.md").read_text()
+    assert "own_car.md" in (ROOT / "mkdocs.yml").read_text()
 
 
 def test_guide_on_synthetic_logger(tmp_path):
@@ -109,12 +117,12 @@ def test_guide_on_synthetic_logger(tmp_path):
     script = re.sub(r"^(hybridev (?:fit|calibrate) .*)$", r"\1 --max-epochs 15 --members 2",
                     guide_script(), flags=re.M)
     assert script.count("--max-epochs 15") == 2
-    out = run_guide(tmp_path, tmp_path / "logger", script)
-    check_outputs(tmp_path, out, N_LOGGER_TRIPS)
+    work, out = run_guide(tmp_path, tmp_path / "logger", script)
+    check_outputs(work, out, N_LOGGER_TRIPS)
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not (REAL / "trips.csv").exists(), reason=f"real trips not found at {REAL}")
 def test_guide_on_real_trips(tmp_path):
-    out = run_guide(tmp_path, REAL, guide_script())
-    check_outputs(tmp_path, out, len(pd.read_csv(REAL / "trips.csv")))
+    work, out = run_guide(tmp_path, REAL, guide_script())
+    check_outputs(work, out, len(pd.read_csv(REAL / "trips.csv")))

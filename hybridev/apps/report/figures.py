@@ -20,10 +20,15 @@ __all__ = [
     "corner_figure",
     "parameter_figure",
     "png_bytes",
+    "posterior_prior_figure",
     "predicted_figure",
     "reliability_figure",
     "residual_figure",
 ]
+
+_LABELS = {"distance_km": "distance (km)", "avg_speed_kmh": "mean speed (km/h)",
+           "max_speed_kmh": "maximum speed (km/h)", "temperature_c": "temperature (°C)",
+           "hour": "hour of departure", "soc_initial": "state of charge at departure"}
 
 _MODELS = (("energy_kwh_nominal", "nominal physics", "tab:gray"),
            ("energy_kwh_calibrated", "calibrated physics", "tab:blue"),
@@ -70,7 +75,8 @@ def _posterior_matrix(post) -> tuple[np.ndarray, list[str], list[float | None]]:
 def corner_figure(post) -> Figure:
     """Corner plot of the physics posterior (the ``corner`` package).
 
-    Red lines: nominal values; dashed: 5, 50 and 95 % quantiles.
+    Red lines: nominal values; dashed: 5, 50 and 95 % quantiles. No titles: with ten
+    parameters they overlap; :func:`posterior_prior_figure` gives each parameter's numbers.
 
     Parameters
     ----------
@@ -87,11 +93,12 @@ def corner_figure(post) -> Figure:
             a, b = min(a, nom), max(b, nom)
         pad = 0.05 * (b - a) if b > a else 0.5 * abs(a) + 1e-12
         span.append((a - pad, b + pad))
-    fig = _figure(1.7 * k, 1.7 * k)
+    fig = _figure(1.9 * k, 1.9 * k)
     corner.corner(x, labels=names, truths=nominal, truth_color="tab:red", range=span,
-                  quantiles=[0.05, 0.5, 0.95], show_titles=True, title_fmt=".3g",
-                  title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 8},
-                  plot_datapoints=False, fig=fig)
+                  quantiles=[0.05, 0.5, 0.95], show_titles=False, max_n_ticks=3,
+                  label_kwargs={"fontsize": 9}, labelpad=0.15, plot_datapoints=False, fig=fig)
+    for ax in fig.axes:
+        ax.tick_params(labelsize=7)
     return fig
 
 
@@ -107,7 +114,9 @@ def chain_figure(post, max_walkers: int = 8) -> Figure:
     walkers = int(post.diagnostics.get("n_walkers", 0) or 0)
     per_walker = walkers > 1 and len(x) % walkers == 0 and len(x) // walkers >= 2
     shown = min(walkers, max_walkers) if per_walker else 0
-    fig = _figure(10, 1.2 * len(names) + 0.6)
+    from matplotlib.ticker import MaxNLocator
+
+    fig = _figure(10, 1.0 * len(names) + 0.9)
     axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)[:, 0]
     for ax, col, name, nom in zip(axes, x.T, names, nominal, strict=True):
         if per_walker:
@@ -116,7 +125,8 @@ def chain_figure(post, max_walkers: int = 8) -> Figure:
             ax.plot(col, lw=0.5)
         if nom is not None:
             ax.axhline(nom, color="k", ls="--", lw=0.8)
-        ax.set_ylabel(name, fontsize=8)
+        ax.set_title(name, fontsize=9, loc="left", pad=2)  # above the panel, not by its ticks
+        ax.yaxis.set_major_locator(MaxNLocator(3))
         ax.tick_params(labelsize=7)
     d = post.diagnostics
     if per_walker:
@@ -150,7 +160,7 @@ def parameter_figure(summary: pd.DataFrame, level: float = 0.9) -> Figure:
     y = np.arange(len(s))[::-1]
     ax.errorbar(ratio["median"], y, xerr=[ratio["median"] - ratio["q05"],
                                           ratio["q95"] - ratio["median"]],
-                fmt="o", color="tab:blue", capsize=3, label=f"median, {level:.0%} CI")
+                fmt="o", color="tab:blue", capsize=3, label=f"median, {100 * level:g} % interval")
     ax.axvline(1.0, color="k", ls="--", lw=0.8, label="nominal")
     ax.set_yticks(y, [f"{n} (nominal {v:.3g})" for n, v in s["nominal"].items()], fontsize=8)
     ax.set_xlabel("fitted / nominal")
@@ -184,7 +194,7 @@ def predicted_figure(pred: pd.DataFrame, level: float) -> Figure:
             ax.errorbar(y[finite], p[finite], yerr=[p[finite] - lo[finite],
                                                     hi[finite] - p[finite]],
                         fmt="o", ms=3, color=color, alpha=0.7, elinewidth=0.8,
-                        label=f"{level:.0%} interval (covers {inside:.0%})")
+                        label=f"{100 * level:g} % interval (covers {100 * inside:.0f} %)")
             if (~finite).any():
                 ax.plot(y[~finite], p[~finite], "x", color="r", label="unbounded interval")
             ax.legend(fontsize=8, loc="upper left")
@@ -204,8 +214,13 @@ def predicted_figure(pred: pd.DataFrame, level: float) -> Figure:
 
 
 def residual_figure(pred: pd.DataFrame, features: list[str]) -> Figure:
-    """Relative error (predicted / measured - 1, %) of each model vs each feature (held-out)."""
-    feats = [f for f in features if f in pred.columns and pred[f].notna().all()]
+    """Relative error (predicted / measured - 1, %) of each model vs each feature (held-out).
+
+    Features missing on some trip, or with one value on every trip (e.g. a
+    ``soc_initial`` filled in for all), are left out: a plot of a constant says nothing.
+    """
+    feats = [f for f in features if f in pred.columns and pred[f].notna().all()
+             and pred[f].nunique() > 1]
     n = max(len(feats), 1)
     cols = min(3, n)
     rows = -(-n // cols)
@@ -218,7 +233,7 @@ def residual_figure(pred: pd.DataFrame, features: list[str]) -> Figure:
             ax.plot(x, (pred[col].to_numpy(float) / y - 1.0) * 100.0, "o", ms=3, alpha=0.7,
                     color=color, label=label)
         ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_xlabel(f, fontsize=9)
+        ax.set_xlabel(_LABELS.get(f, f), fontsize=9)
     for ax in axes[len(feats):]:
         ax.axis("off")
     for ax in axes[::cols]:
@@ -264,4 +279,68 @@ def reliability_figure(curves: dict[str, tuple[np.ndarray, np.ndarray]], n_trips
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title("Reliability of central intervals", fontsize=10)
     fig.tight_layout()
+    return fig
+
+
+def posterior_prior_figure(post, level: float = 0.99) -> Figure:
+    """Each parameter's posterior against its prior, one panel per parameter.
+
+    Histogram: posterior samples; grey band: the prior's central ``level`` range;
+    dotted: the prior's centre; red: the nominal value; black: a hard bound of the
+    prior that the posterior presses against. Titles give the median and the 90 %
+    interval. Panels are large enough to read at page width (three per row),
+    unlike a corner plot of ten parameters. A logarithmic axis where the prior
+    range spans more than a factor of 20.
+
+    Parameters
+    ----------
+    post : PhysicsPosterior
+    level : float
+        Level of the prior range drawn.
+    """
+    pc = post.prior_check(level)
+    names = list(post.param_names)
+    cols = 3
+    rows = -(-len(names) // cols)
+    fig = _figure(12, 2.6 * rows + 0.6)
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    nominal = post.nominal_values(post.vehicle)
+    for ax, name, col in zip(axes, names, post.samples.T, strict=False):
+        r = pc.loc[name]
+        plo, phi = float(r["prior_lo"]), float(r["prior_hi"])
+        q05, q50, q95 = np.quantile(col, [0.05, 0.5, 0.95])
+        lo = min(plo, float(np.quantile(col, 0.001)))
+        hi = max(phi, float(np.quantile(col, 0.999)))
+        log = lo > 0 and hi / lo > 20
+        bins = (np.geomspace(max(np.quantile(col, 0.001), 1e-12), np.quantile(col, 0.999), 40)
+                if log else 40)
+        ax.axvspan(plo, phi, color="0.88", label=f"prior {100 * level:g} % range")
+        ax.hist(col, bins=bins, color="tab:blue", alpha=0.8, label="posterior")
+        ax.axvline(float(r["prior_centre"]), color="0.4", ls=":", lw=1.2, label="prior centre")
+        if nominal.get(name) is not None:
+            ax.axvline(nominal[name], color="tab:red", lw=1.2, label="nominal")
+        if bool(r.get("at_bound", False)):
+            ax.axvline(float(r["bound"]), color="k", lw=2.0, label="hard bound")
+        if log:
+            from matplotlib.ticker import FuncFormatter, NullFormatter
+
+            ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        pad = 0.03 * (hi - lo) if not log else 0.0
+        ax.set_xlim(lo - pad, hi + pad) if not log else ax.set_xlim(lo / 1.1, hi * 1.1)
+        ax.set_yticks([])
+        ax.tick_params(labelsize=8)
+        ax.set_title(f"{name}\nmedian {q50:.3g} (90 %: {q05:.3g} to {q95:.3g})", fontsize=9)
+    for ax in axes[len(names):]:
+        ax.axis("off")
+    handles, labels = [], []
+    for ax in axes[:len(names)]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
+    fig.suptitle("Calibrated physics parameters: posterior against prior", fontsize=11)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.97))
     return fig

@@ -17,6 +17,12 @@ import numpy as np
 import pandas as pd
 
 from hybridev import metrics as M
+from hybridev.apps.report.card import (
+    accuracy_sentence,
+    calibration_verdict,
+    reference_consumption,
+    warning_sentences,
+)
 
 __all__ = ["FLAG_FRACTION", "MODEL_LABELS", "REPORT_LEVELS", "jsonable", "score_holdout"]
 
@@ -119,6 +125,9 @@ def _parameters(post) -> list[dict]:
                                         for n, ok in pc["inside"].items()}, dtype=object)
     s["at a hard bound"] = pd.Series({n: (f"YES: {b:.4g}" if at else "no") for n, (b, at)
                                       in pc[["bound", "at_bound"]].iterrows()}, dtype=object)
+    s["inside_prior"] = pd.Series({n: bool(ok) for n, ok in pc["inside"].items()}, dtype=object)
+    s["hard_bound"] = pd.Series({n: (float(b) if at else None) for n, (b, at)
+                                 in pc[["bound", "at_bound"]].iterrows()}, dtype=object)
     return s.reset_index().to_dict(orient="records")
 
 
@@ -221,6 +230,9 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
         and ``share_in_domain``. Also ``data``, ``split``,
         ``parameters`` (posterior of (b) vs nominal, 90 % intervals),
         ``diagnostics``, ``hybrid`` (fit information), ``flagged`` trips,
+        ``headline`` (the summary card, :mod:`hybridev.apps.report.card`:
+        ``accuracy``, ``calibration``, ``reference_consumption`` in kWh/100 km
+        and ``warnings`` as sentences),
         ``rejected`` rows, ``labels`` and ``config``.
     """
     pred = result.predictions
@@ -244,10 +256,15 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
     src = rej["source"] if "source" in rej.columns else pd.Series("trips", index=rej.index)
     n_valid = result.n_train + result.n_test
     post, model = result.posterior, result.model
+    acc = accuracy_sentence(pred)
+    main = next(r for r in hyb["coverage_table"] if np.isclose(r["nominal"], lv))
+    width = None if main["mean_width_kwh"] is None else float(
+        np.mean((pred["energy_kwh_hi"] - pred["energy_kwh_lo"]) / pred["energy_kwh"]))
+    verdict = calibration_verdict(main["empirical"], lv, len(pred), main["unbounded"], width)
     d = post.diagnostics
     hyb_post = getattr(model, "posterior_", None)
     cp = getattr(model, "conformal_", None)
-    return jsonable({
+    out = jsonable({
         "data": {"n_rows_read": n_valid + int((src == "trips").sum()), "n_valid": n_valid,
                  "n_rejected": len(rej), "n_rejected_trip_rows": int((src == "trips").sum()),
                  "n_rejected_timeseries": int((src == "timeseries").sum()),
@@ -270,6 +287,11 @@ def score_holdout(result, rejected: pd.DataFrame | None = None) -> dict:
                    "physics_posterior_median": None if hyb_post is None else hyb_post.median(),
                    "discrepancy_term_weights": _discrepancy(model)},
         "flagged": _flagged(pred),
+        "headline": {"accuracy": acc, "calibration": verdict,
+                     "reference_consumption": reference_consumption(
+                         model, lv, int(result.config.get("seed", 0)))},
         "rejected": rej.to_dict(orient="records"),
         "config": result.config,
     })
+    out["headline"]["warnings"] = warning_sentences(out)
+    return out
