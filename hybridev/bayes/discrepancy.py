@@ -9,7 +9,7 @@ the model's heating need). Kennedy and O'Hagan's remedy is a *model-discrepancy*
 term beside the physical parameters; here it is linear in the physics' own
 energy terms, so it extrapolates like the physics does.
 
-With the trip's energy split into the 14 terms of
+With the trip's energy split into the 15 terms of
 :meth:`hybridev.physics.stats.PhysicsStats.features` at the posterior median
 (``T_ik``, kWh; :func:`hybridev.physics.stats.term_energies`), the measured
 energy is modelled as
@@ -66,7 +66,7 @@ _ACTIVE_TOL = 1e-6
 
 
 def regen_upper_bounds(params) -> np.ndarray:
-    """Upper bounds of the 14 multipliers: ``1 / (s REGEN_EFFICIENCY_MAX)`` on regeneration.
+    """Upper bounds of the 15 multipliers: ``1 / (s REGEN_EFFICIENCY_MAX)`` on regeneration.
 
     Parameters
     ----------
@@ -75,7 +75,7 @@ def regen_upper_bounds(params) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray, shape (14,)
+    numpy.ndarray, shape (15,)
         ``inf`` for the terms that are not regenerated energy.
 
     Examples
@@ -92,23 +92,23 @@ def regen_upper_bounds(params) -> np.ndarray:
 
 
 class TermDiscrepancy:
-    """Multipliers ``1 + delta`` of the physics' 14 energy terms, with uncertainty.
+    """Multipliers ``1 + delta`` of the physics' 15 energy terms, with uncertainty.
 
     Build with :meth:`fit`; apply through ``term_weights=`` of
     :func:`hybridev.physics.stats.energy_from_stats`.
 
     Parameters
     ----------
-    weights : array_like, shape (14,)
+    weights : array_like, shape (15,)
         Point multipliers (``>= 0``); 1 for terms not fitted.
     cov : array_like, shape (n_active, n_active)
         Posterior covariance of the fitted terms' ``delta``.
-    active : array_like of bool, shape (14,)
+    active : array_like of bool, shape (15,)
         Which terms were fitted.
     shrinkage : float
         The evidence-maximising ``lambda / alpha`` (ridge penalty in units of
         the relative residual).
-    upper : array_like, shape (14,), optional
+    upper : array_like, shape (15,), optional
         Upper bounds of the multipliers (default: none); :meth:`fit` sets
         the regeneration bound.
 
@@ -120,7 +120,7 @@ class TermDiscrepancy:
     >>> e = energy_from_stats(s)
     >>> d = TermDiscrepancy.fit(s, None, e * 1.05, np.abs(e))
     >>> bool(np.all(d.weights >= 0)), d.sample(3, 0).shape
-    (True, (3, 14))
+    (True, (3, 15))
     """
 
     def __init__(self, weights, cov, active, shrinkage: float = 0.0, upper=None) -> None:
@@ -181,7 +181,7 @@ class TermDiscrepancy:
         return cls(w, br.sigma_, active, lam, upper=upper)
 
     def sample(self, n: int, rng=None) -> np.ndarray:
-        """``n`` draws of the multipliers, shape (n, 14), each in ``[0, upper]``."""
+        """``n`` draws of the multipliers, shape (n, 15), each in ``[0, upper]``."""
         rng = np.random.default_rng(rng)
         out = np.tile(self.weights, (int(n), 1))
         if self.active.any() and n:

@@ -10,7 +10,7 @@ shape, so a heat-pump car modelled as PTC leaves a residual trend against
 temperature.
 
 :func:`select_heater_kind` fits both shapes to the trips by relative
-non-negative least squares on the physics' own energy terms (the 14 terms of
+non-negative least squares on the physics' own energy terms (the 15 terms of
 :func:`hybridev.physics.stats.term_energies`, each with a free non-negative
 multiplier: both candidates have the same number of free parameters) and
 compares their marginal likelihoods over the driver's heating onset
@@ -113,12 +113,12 @@ def _onset_log_weights(prior: PhysicsPrior) -> np.ndarray:
 
 
 def _fits(stats: PhysicsStats, y: np.ndarray) -> list[np.ndarray]:
-    """Relative residuals of the NNLS fit of the 14 energy terms at each onset offset."""
+    """Relative residuals of the NNLS fit of the 15 energy terms at each onset offset."""
     offsets = ONSET_PROFILE_K if stats.heating_offset_dkwh is not None else [0.0]
     out = []
     for d in offsets:
         terms = term_energies(stats, {"heating_offset_k": stats.vehicle.heating_offset_k + d})
-        a = terms / y[:, None]  # (n_trips, 14), kWh per kWh measured
+        a = terms / y[:, None]  # (n_trips, 15), kWh per kWh measured
         keep = np.abs(a).sum(axis=0) > 0
         w, _ = nnls(a[:, keep], np.ones(len(y)))
         out.append(a[:, keep] @ w - 1.0)

@@ -12,9 +12,13 @@ Per interval:
 * wheel power ``P_w = (C_r m g cos(theta) + b v + rho C_d A v^2 / 2 + m g sin(theta) + m a) v``;
 * traction ``P_t = mult * max(P_w, 0) / eta_d`` (clipped at zero, so braking is
   never counted as traction, trap 2);
-* regeneration ``P_r = eta_r * max(-P_w, 0)``: only a fraction of the
+* regeneration ``P_r = min(eta_r * max(-P_w, 0), P_max)``: only a fraction of the
   *negative wheel power* returns to the battery, never more than the braking
-  energy that was available;
+  energy that was available, and never more than the regenerative power limit
+  ``P_max`` (:func:`regen_limit_kw`: ``regen_max_kw``, shrunk at high state of
+  charge and, with the continuous climate model, by the cold regen factor);
+  braking power above it goes to the friction brakes. The paper preset has
+  no limit;
 * auxiliary ``P_a = P_b + P_c(T) + P_m(mode)``; with the continuous climate
   model (:mod:`hybridev.physics.thermal`) ``P_c`` is the steady climate power,
   the trip's warm-up energy is spread evenly over its duration, and the
@@ -22,6 +26,8 @@ Per interval:
   ``P_d`` (``drive_loss_kw``) is added while the car moves (interval-mean
   speed above 0.5 m/s);
 * battery power ``P = P_t + P_a - P_r``, energy ``E = sum(P dt) / 3600`` kWh.
+  The auxiliary and drive-loss terms are added after the traction/regeneration
+  split: they are never recovered and never offset against the limit.
 
 Every function is vectorised over leading trip axes: ``speed_mps`` is
 ``(n_samples,)`` or ``(n_trips, n_samples)``, per-trip quantities are scalars or
@@ -37,6 +43,7 @@ from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
 from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 
 __all__ = [
+    "regen_limit_kw",
     "soc_trajectory",
     "trace_energy_kwh",
     "trace_power_kw",
@@ -139,27 +146,70 @@ def _moving_steps(v: np.ndarray) -> np.ndarray:
     return np.count_nonzero(vm > 2.0 * MOVING_MPS, axis=-1)[..., None]
 
 
-def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw) -> np.ndarray:
+def regen_limit_kw(vehicle: VehicleParams, soc=None):
+    """Regenerative power limit before the cold factor, kW (``inf``: none).
+
+    ``regen_max_kw`` times the state-of-charge derating
+    ``clip((1 - soc) / (1 - regen_derate_soc), 0, 1)``; ``soc`` NaN or None:
+    no derating. The paper preset (``regen_max_kw=None``) has no limit.
+
+    Parameters
+    ----------
+    vehicle : VehicleParams
+    soc : float or array_like, optional
+        State of charge at the trip's start, [0, 1].
+
+    Returns
+    -------
+    float or numpy.ndarray (shape of ``soc``), kW
+
+    Examples
+    --------
+    >>> v = VehicleParams(regen_max_kw=50.0)
+    >>> regen_limit_kw(v, [0.5, 0.95, 1.0, float("nan")]).round(6).tolist()
+    [50.0, 25.0, 0.0, 50.0]
+    >>> regen_limit_kw(VehicleParams(), 1.0)
+    inf
+    """
+    if vehicle.regen_max_kw is None:
+        return np.inf if soc is None or np.ndim(soc) == 0 else np.full(np.shape(soc), np.inf)
+    if soc is None:
+        return float(vehicle.regen_max_kw)
+    s = np.asarray(soc, dtype=float)
+    f = np.clip((1.0 - s) / (1.0 - vehicle.regen_derate_soc), 0.0, 1.0)
+    out = vehicle.regen_max_kw * np.where(np.isfinite(s), f, 1.0)
+    return float(out) if out.ndim == 0 else out
+
+
+def _battery_energy_kwh(pw_w: np.ndarray, dt, mult_over_eta, eta_r, aux_kw,
+                        cap_kw=np.inf) -> np.ndarray:
     """Net battery energy (kWh) per trace from wheel power in W; overwrites ``pw_w``.
 
-    ``sum(mult/eta_d * max(P_w, 0) + eta_r * min(P_w, 0) + P_aux) * dt``,
-    computed from two sums so that no battery-power array is formed. Per-trip
-    inputs are scalars or ``(n_trips, 1)`` columns; returns shape ``()`` or
-    ``(n_trips,)``.
+    ``sum(mult/eta_d * max(P_w, 0) - min(-eta_r * min(P_w, 0), P_max) + P_aux) * dt``;
+    without a limit it is computed from two sums so that no battery-power
+    array is formed. Per-trip inputs are scalars or ``(n_trips, 1)`` columns;
+    returns shape ``()`` or ``(n_trips,)``.
     """
-    total = pw_w.sum(axis=-1, keepdims=True)
-    pos = np.maximum(pw_w, 0.0, out=pw_w).sum(axis=-1, keepdims=True)
-    wheel_kw = (mult_over_eta * pos + eta_r * (total - pos)) * 1e-3
+    if np.all(np.isinf(cap_kw)):
+        total = pw_w.sum(axis=-1, keepdims=True)
+        pos = np.maximum(pw_w, 0.0, out=pw_w).sum(axis=-1, keepdims=True)
+        wheel_kw = (mult_over_eta * pos + eta_r * (total - pos)) * 1e-3
+    else:
+        neg = np.minimum(pw_w, 0.0)
+        neg *= eta_r * 1e-3
+        np.maximum(neg, -np.asarray(cap_kw, dtype=float), out=neg)
+        pos = np.maximum(pw_w, 0.0, out=pw_w).sum(axis=-1, keepdims=True)
+        wheel_kw = mult_over_eta * pos * 1e-3 + neg.sum(axis=-1, keepdims=True)
     return ((wheel_kw + aux_kw * pw_w.shape[-1]) * (dt / 3600.0))[..., 0]
 
 
 def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
-                   v: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mult / eta_d, eta_r, aux kW), each a scalar or an (n_trips, 1) column.
+                   v: np.ndarray, dt, soc=None):
+    """(mult / eta_d, eta_r, aux kW, regen limit kW), each a scalar or an (n_trips, 1) column.
 
-    With the continuous climate model the cold-weather factors scale ``mult``
-    and ``eta_r``, and the warm-up energy is spread evenly over the trip as
-    extra auxiliary power.
+    With the continuous climate model the cold-weather factors scale ``mult``,
+    ``eta_r`` and the regen limit, and the warm-up energy is spread evenly
+    over the trip as extra auxiliary power.
     """
     n_trips = v.shape[0] if v.ndim == 2 else None
     mult, eta_r, mode_kw = _profile_values(profile, n_trips)
@@ -167,12 +217,20 @@ def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
     aux = veh.aux_base_kw + hvac_power_kw(t, veh) + _per_trip(mode_kw, v, "profile")
     mult = _per_trip(mult, v, "profile")
     eta_r = _per_trip(eta_r, v, "profile")
+    cap = np.inf
+    if veh.regen_max_kw is not None:
+        if soc is not None:
+            s = _per_trip(soc, v, "soc")
+            if np.any(np.isfinite(s) & ((s < 0) | (s > 1))):
+                raise ValueError(f"soc={soc!r} is outside the allowed range [0, 1] (NaN: unknown)")
+        cap = _per_trip(regen_limit_kw(veh, soc), v, "soc")
     if veh.climate_model == "continuous":
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
+        cap = cap * regen
         dur_s = dt * (v.shape[-1] - 1)
         aux = aux + warmup_energy_kwh(t, dur_s, veh) / (dur_s / 3600.0)
-    return mult / veh.drivetrain_efficiency, eta_r, aux
+    return mult / veh.drivetrain_efficiency, eta_r, aux, cap
 
 
 def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -210,7 +268,7 @@ def wheel_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
 
 def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
                    profile: ProfileLike = PROFILES["normal"], temperature_c=20.0,
-                   grade_rad=0.0) -> np.ndarray:
+                   grade_rad=0.0, soc=None) -> np.ndarray:
     """Battery power over each interval of a speed trace, kW.
 
     See the module docstring for the model. Positive values discharge.
@@ -223,6 +281,9 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     profile : DrivingProfile, str, or sequence of them (n_trips,)
     temperature_c : float or array_like (n_trips,), degC
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
+    soc : float or array_like (n_trips,), optional
+        State of charge at the trip's start (NaN or None: unknown); derates
+        the regenerative power limit (:func:`regen_limit_kw`).
 
     Returns
     -------
@@ -237,12 +298,14 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
+    mult_eta, eta_r, aux, cap = _battery_terms(veh, profile, temperature_c, v, dt, soc)
     pw = _wheel_power_w(v, dt, veh, th)
     pw *= 1e-3
     out = np.maximum(pw, 0.0) * mult_eta
     np.minimum(pw, 0.0, out=pw)
     pw *= eta_r  # regeneration, <= 0
+    if not np.all(np.isinf(cap)):
+        np.maximum(pw, -cap, out=pw)  # above the limit: friction brakes
     out += pw
     out += aux
     if veh.drive_loss_kw:
@@ -252,7 +315,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
 
 def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
                      profile: ProfileLike = PROFILES["normal"], temperature_c=20.0,
-                     grade_rad=0.0) -> np.ndarray:
+                     grade_rad=0.0, soc=None) -> np.ndarray:
     """Battery energy used over each speed trace, kWh.
 
     Parameters
@@ -267,12 +330,14 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
         and mode auxiliary power.
     temperature_c : float or array_like (n_trips,), degC
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
+    soc : float or array_like (n_trips,), optional
+        State of charge at the trip's start (derates the regen limit).
 
     Returns
     -------
     numpy.ndarray, shape () or (n_trips,), kWh
         Net battery energy (discharge minus regeneration). Can be negative on
-        a long descent.
+        a long descent (less so with a regen limit).
 
     Examples
     --------
@@ -285,8 +350,8 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     veh = vehicle or VehicleParams()
     v, dt = _as_trace(speed_mps, dt_s)
     th = _interval_grade(grade_rad, v)
-    mult_eta, eta_r, aux = _battery_terms(veh, profile, temperature_c, v, dt)
-    e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux)
+    mult_eta, eta_r, aux, cap = _battery_terms(veh, profile, temperature_c, v, dt, soc)
+    e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux, cap)
     if veh.drive_loss_kw:
         e = e + (veh.drive_loss_kw * _moving_steps(v) * (dt / 3600.0))[..., 0]
     return e
@@ -322,7 +387,7 @@ def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | Non
     if not np.all(np.isfinite(s0)) or np.any((s0 < 0) | (s0 > 1)):
         raise ValueError(f"soc_initial={soc_initial!r} is outside the allowed range [0, 1]")
     p = trace_power_kw(speed_mps, dt_s, vehicle=veh, profile=profile,
-                       temperature_c=temperature_c, grade_rad=grade_rad)
+                       temperature_c=temperature_c, grade_rad=grade_rad, soc=s0)
     dt = np.asarray(dt_s, dtype=float)  # validated by trace_power_kw
     dt = dt.reshape(-1, 1) if dt.ndim else dt
     s0b = _per_trip(s0, p, "soc_initial")

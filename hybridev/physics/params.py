@@ -25,8 +25,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-__all__ = ["CLIMATE_MODELS", "COMPACT_BEV_AUX_KW", "COMPACT_BEV_DRIVE_LOSS_KW", "HEATER_KINDS", "LOGGED_PROFILE", "PROFILES", "DrivingProfile",
-           "ProfileLike", "VehicleParams", "get_profile"]
+__all__ = ["CLIMATE_MODELS", "COMPACT_BEV_AUX_KW", "COMPACT_BEV_DRIVE_LOSS_KW",
+           "COMPACT_BEV_REGEN_MAX_KW", "HEATER_KINDS", "LOGGED_PROFILE", "PROFILES",
+           "DrivingProfile", "ProfileLike", "VehicleParams", "get_profile"]
 
 CLIMATE_MODELS = ("paper_bands", "continuous")
 """Allowed ``VehicleParams.climate_model`` values."""
@@ -204,6 +205,23 @@ class VehicleParams:
         current into a cold pack. 0.01/K: -27 % at -7 degC.
     cold_ref_c : float
         Temperature below which the cold losses start, degC.
+    regen_max_kw : float or None
+        Largest power the battery accepts from regenerative braking, kW
+        (recovered power, battery side). Braking power whose recovered share
+        ``eta_r |P_w|`` would exceed it goes to the friction brakes: the
+        recovered power is ``min(eta_r |P_w|, P_max)``. The auxiliary and
+        climate loads are added after this split and are never offset
+        against it. ``None`` (the paper preset): no limit, the paper's
+        physics; :meth:`from_coastdown` uses :data:`COMPACT_BEV_REGEN_MAX_KW`.
+        With the continuous climate model the cold-weather regen factor
+        (``cold_regen_loss_per_k``) scales the limit as it scales ``eta_r``
+        (the battery management limits the charge current of a cold pack).
+    regen_derate_soc : float
+        State of charge above which the limit shrinks linearly, to zero at
+        SoC 1 (a nearly full pack cannot take charge; cars show "regen
+        limited"). 0.9 by default. Applied per trip from its starting SoC
+        (``soc_initial``, or the first logged ``soc``) when known, and only to
+        a finite ``regen_max_kw``.
     road_load_source : {"datasheet", "coastdown"}
         Where ``C_r``, ``C_dA`` and ``b`` come from. ``"coastdown"`` (set by
         :meth:`from_coastdown`) makes the calibration's priors on them tight
@@ -254,6 +272,8 @@ class VehicleParams:
     cold_traction_loss_per_k: float = 0.004
     cold_regen_loss_per_k: float = 0.01
     cold_ref_c: float = 20.0
+    regen_max_kw: float | None = None
+    regen_derate_soc: float = 0.9
     road_load_source: str = "datasheet"
     source: str = field(
         default="Paper, Sec. II-C: vehicle table (EPA/manufacturer-based) and P_b, P_c(T)",
@@ -273,6 +293,9 @@ class VehicleParams:
         _check_range(o, "aux_base_kw", self.aux_base_kw, 0.0, 50.0)
         _check_range(o, "linear_drag_n_per_mps", self.linear_drag_n_per_mps, 0.0, 1000.0)
         _check_range(o, "drive_loss_kw", self.drive_loss_kw, 0.0, 50.0)
+        if self.regen_max_kw is not None:
+            _check_range(o, "regen_max_kw", self.regen_max_kw, 0.0, 1000.0, lo_open=True)
+        _check_range(o, "regen_derate_soc", self.regen_derate_soc, 0.0, 1.0, hi_open=True)
         for name, allowed in (("climate_model", CLIMATE_MODELS), ("heater_kind", HEATER_KINDS),
                               ("road_load_source", ("datasheet", "coastdown"))):
             if getattr(self, name) not in allowed:
@@ -351,7 +374,8 @@ class VehicleParams:
             Unless given, the result uses the continuous climate model with
             the compact-BEV defaults of the fields (``climate_model=
             "continuous"``), base auxiliary power :data:`COMPACT_BEV_AUX_KW`,
-            drive loss :data:`COMPACT_BEV_DRIVE_LOSS_KW`,
+            drive loss :data:`COMPACT_BEV_DRIVE_LOSS_KW`, regenerative
+            power limit :data:`COMPACT_BEV_REGEN_MAX_KW`,
             ``road_load_source="coastdown"`` (tight calibration priors on
             the road load) and ``heater_kind="auto"`` (learned from the
             trips; pass ``"ptc"`` or ``"heat_pump"`` if the spec sheet
@@ -388,6 +412,7 @@ class VehicleParams:
         kwargs.setdefault("road_load_source", "coastdown")
         kwargs.setdefault("aux_base_kw", COMPACT_BEV_AUX_KW)
         kwargs.setdefault("drive_loss_kw", COMPACT_BEV_DRIVE_LOSS_KW)
+        kwargs.setdefault("regen_max_kw", COMPACT_BEV_REGEN_MAX_KW)
         return cls(
             mass_kg=float(mass_kg),
             rolling_resistance_coef=float(a_n) / (float(mass_kg) * gravity_mps2),
@@ -413,6 +438,24 @@ no-load losses of an 80-150 kW permanent-magnet motor and its inverter are
 typically 0.5-2 % of rated power at mid speed, plus the drive-only pumps and
 fans; 0.3 kW is a conservative centre (the calibration's prior spans a
 factor ~2 either way)."""
+
+
+COMPACT_BEV_REGEN_MAX_KW = 50.0
+"""Regenerative power limit of a compact BEV, kW (battery side).
+
+The battery management limits regeneration by the pack's charge current, the
+same limit that sets its peak DC charging power; compact BEVs of 40-60 kWh
+are specified at about 46-55 kW peak DC charge (Nissan Leaf 40 kWh: 50 kW
+CHAdeMO; Chevrolet Bolt EV: 55 kW; Renault Zoe ZE50: 50 kW; manufacturers'
+specification sheets), and their one-pedal regeneration decelerates at about
+0.1-0.2 g, e.g. 1800 kg x 0.15 g x 50 km/h = 37 kW at the wheels. Owner
+manuals state that this maximum is reduced when the pack is full or very
+cold or hot (e.g. Jaguar I-PACE owner information, "Regenerative braking":
+"the maximum level of regenerated energy may be temporarily reduced ... when
+the high voltage battery is fully charged or driving ... in very high or low
+ambient temperatures"), which :class:`VehicleParams` models with
+``regen_derate_soc`` and the cold regen factor. 50 kW is the centre of that
+range; set ``regen_max_kw`` from the car's data sheet if it says."""
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,18 @@ the HVAC scale ``h`` (1 nominally), so per trip and per sign it suffices to keep
 
 all in kWh, plus the duration ``T``, the HVAC and mode powers and the warm-up
 energy ``E_warm`` (``w`` = ``warmup_scale``, 1 nominally; zero for the paper's
-climate model). The cold-weather factors of the continuous climate model are
-folded into ``mult`` and ``eta_r``. Then
+climate model).
+
+With a regenerative power limit (``VehicleParams.regen_max_kw``), braking
+intervals split further: an interval whose recovered power
+``eta_r |P_w|`` would exceed the limit ``P_max`` (at the reference vehicle)
+recovers exactly ``P_max dt``, a constant, so it leaves the ``_neg`` sums and
+adds to ``regen_capped_kwh`` (the energy recovered at the limit, entering
+``E`` with a minus sign and coefficient 1). The paper preset has no limit
+and ``regen_capped_kwh`` is zero.
+
+The cold-weather factors of the continuous climate model are
+folded into ``mult``, ``eta_r`` and the limit. Then
 :func:`energy_from_stats` evaluates thousands of parameter draws against all
 trips in one broadcast.
 
@@ -141,6 +151,13 @@ class PhysicsStats:
         :data:`HEATING_OFFSET_GRID_K` from ``vehicle.heating_offset_k`` (zero
         at offset 0); continuous climate model only. ``heating_offset_k`` in
         the parameters of :func:`energy_from_stats` uses them.
+    regen_capped_kwh : numpy.ndarray, shape (n_rows,), kWh, optional
+        Energy recovered in the braking intervals where regeneration runs at
+        its power limit (``sum P_max dt``, with the trip's SoC derating and
+        cold factor); enters the energy as ``-regen_capped_kwh``. Zero
+        without a limit.
+    regen_capped_h : numpy.ndarray, shape (n_rows,), h, optional
+        Time spent braking at the regen limit (at the reference vehicle).
     """
 
     roll_pos: np.ndarray
@@ -166,9 +183,12 @@ class PhysicsStats:
     moving_h: np.ndarray | None = None
     heating_offset_dkwh: np.ndarray | None = None
     warmup_offset_dkwh: np.ndarray | None = None
+    regen_capped_kwh: np.ndarray | None = None
+    regen_capped_h: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("warmup_kwh", "cooling_kw", "moving_h"):
+        for name in ("warmup_kwh", "cooling_kw", "moving_h", "regen_capped_kwh",
+                     "regen_capped_h"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(len(self.trip)))
 
@@ -182,18 +202,20 @@ class PhysicsStats:
         return self.n_rows != self.n_trips
 
     def features(self) -> np.ndarray:
-        """Design matrix ``(14, n_rows)`` with ``E = coefficients @ features`` (kWh).
+        """Design matrix ``(15, n_rows)`` with ``E = coefficients @ features`` (kWh).
 
         The matching coefficients are ``[C_r/eta_d, C_dA/eta_d, b/eta_d, 1/eta_d,
-        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool, P_d]`` with
-        ``h`` = ``hvac_scale`` (:func:`coefficients`).
+        s C_r, s C_dA, s b, s, P_b, h h_heat, 1, warmup_scale, h h_cool, P_d, 1]`` with
+        ``h`` = ``hvac_scale`` (:func:`coefficients`); the last row is
+        ``-regen_capped_kwh`` (regeneration at its power limit).
         """
         return np.stack([
             self.mult * self.roll_pos, self.mult * self.aero_pos, self.mult * self.lin_pos,
             self.mult * self.rest_pos, self.eta_r * self.roll_neg, self.eta_r * self.aero_neg,
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
             (self.hvac_kw - self.cooling_kw) * self.duration_h, self.mode_kw * self.duration_h,
-            self.warmup_kwh, self.cooling_kw * self.duration_h, self.moving_h])
+            self.warmup_kwh, self.cooling_kw * self.duration_h, self.moving_h,
+            -self.regen_capped_kwh])
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -239,7 +261,7 @@ def _param_values(stats: PhysicsStats, params) -> dict[str, np.ndarray]:
 
 
 def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
-    """The 14 coefficients of :meth:`PhysicsStats.features` from parameter values.
+    """The 15 coefficients of :meth:`PhysicsStats.features` from parameter values.
 
     ``p`` maps every name of :data:`STAT_PARAMS` to a scalar or array; the
     entries broadcast together.
@@ -249,10 +271,10 @@ def coefficients(p: Mapping[str, np.ndarray]) -> tuple:
     s, h = p["regen_scale"], p["hvac_scale"]
     return (cr * inv, cda * inv, b * inv, inv, s * cr, s * cda, s * b, s, p["aux_base_kw"],
             h * p["heating_scale"], np.ones_like(inv), p["warmup_scale"],
-            h * p["cooling_scale"], p["drive_loss_kw"])
+            h * p["cooling_scale"], p["drive_loss_kw"], np.ones_like(inv))
 
 
-N_TERMS = 14
+N_TERMS = 15
 """Rows of :meth:`PhysicsStats.features` (energy terms of a trip)."""
 
 REGEN_TERMS = (4, 5, 6, 7)
@@ -346,7 +368,7 @@ def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarra
 
 
 def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
-    """Each trip's energy split into the 14 terms of :meth:`PhysicsStats.features`, kWh.
+    """Each trip's energy split into the 15 terms of :meth:`PhysicsStats.features`, kWh.
 
     Parameters
     ----------
@@ -356,7 +378,7 @@ def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray, shape (n_trips, 14), kWh
+    numpy.ndarray, shape (n_trips, 15), kWh
         Mixture mean over the mode rows of marginalised trips; the rows sum
         to :func:`energy_from_stats`.
 
@@ -399,10 +421,10 @@ def energy_from_stats(stats: PhysicsStats, params=None, term_weights=None) -> np
         ``P_b``; mass, climate model and air density always come from the
         statistics (``hvac_scale`` and ``warmup_scale`` rescale their climate
         terms).
-    term_weights : array_like, shape (14,) or (n_draws, 14), optional
-        Multipliers of the 14 energy terms of :meth:`PhysicsStats.features`
+    term_weights : array_like, shape (15,) or (n_draws, 15), optional
+        Multipliers of the 15 energy terms of :meth:`PhysicsStats.features`
         (the model-discrepancy re-weighting of
-        :mod:`hybridev.bayes.discrepancy`); ``(n_draws, 14)`` pairs with
+        :mod:`hybridev.bayes.discrepancy`); ``(n_draws, 15)`` pairs with
         ``(n_draws, 1)`` parameter arrays. Default: all 1.
 
     Returns

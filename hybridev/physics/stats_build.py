@@ -2,6 +2,17 @@
 
 See :mod:`hybridev.physics.stats` for what the statistics are and how energy
 follows from them.
+
+Reference implementation of the interval split (numpy): an interval with wheel
+power ``P_w`` (at the reference vehicle) is *driving* when ``P_w > 0``;
+otherwise it is *braking*, and a braking interval is *capped* when its
+recovered power would exceed the regenerative limit, i.e.
+``-P_w > P_lim / eta_r`` with ``P_lim`` = :func:`~hybridev.physics.forces.regen_limit_kw`
+(SoC-derated, before the cold factor, which scales ``eta_r`` and the limit
+alike and so cancels here) and ``eta_r`` the profile's regen efficiency.
+Driving intervals feed the ``_pos`` sums, uncapped braking ones the ``_neg``
+sums, capped ones only their duration (``regen_capped_kwh = cold x P_lim x
+t_capped``).
 """
 
 from __future__ import annotations
@@ -12,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
-from hybridev.physics.forces import MOVING_MPS, _moving_steps
+from hybridev.physics.forces import MOVING_MPS, _moving_steps, regen_limit_kw
 from hybridev.physics.kinematics import profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, HEATING_OFFSET_GRID_K, PhysicsStats
@@ -27,7 +38,7 @@ _SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 c
 
 
 def _components(vm, acc, cos_th, sin_th, dt, veh: VehicleParams):
-    """Per-interval (roll, aero, lin, rest) energies in kWh and the sign of P_w."""
+    """Per-interval (roll, aero, lin, rest) energies and the wheel energy ``P_w dt``, kWh."""
     m, g = veh.mass_kg, veh.gravity_mps2
     vdt = vm * dt / _J_PER_KWH
     roll = (m * g) * cos_th * vdt
@@ -36,7 +47,20 @@ def _components(vm, acc, cos_th, sin_th, dt, veh: VehicleParams):
     rest = (m * g * sin_th + m * acc) * vdt
     pw = (veh.rolling_resistance_coef * roll + veh.drag_area_m2 * aero
           + veh.linear_drag_n_per_mps * lin + rest)
-    return (roll, aero, lin, rest), pw > 0
+    return (roll, aero, lin, rest), pw
+
+
+def _regen_threshold(veh: VehicleParams, eta_r_profile, soc, n: int):
+    """(limit kW, braking wheel-power threshold W) per row, each shape (n,).
+
+    ``inf`` without a limit (paper preset) or with zero regen efficiency.
+    """
+    cap = np.broadcast_to(np.asarray(regen_limit_kw(veh, None if soc is None else
+                                                    np.broadcast_to(soc, (n,))), float), (n,))
+    eta = np.broadcast_to(np.asarray(eta_r_profile, dtype=float), (n,))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        thr = np.where(eta > 0, cap * 1e3 / np.where(eta > 0, eta, 1.0), np.inf)
+    return cap, np.where(np.isfinite(cap), thr, np.inf)
 
 
 def _profile_consts(profile, n: int):
@@ -66,9 +90,12 @@ def _heating_grid_kw(temperature_c: np.ndarray, vehicles) -> np.ndarray:
 def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
               start_temperature_c=None, cooling_kw=None, moving_s=None,
-              parked_s=None, heating_grid_kw=None, offset_grid: bool = True) -> PhysicsStats:
+              parked_s=None, heating_grid_kw=None, offset_grid: bool = True,
+              regen_cap_kw=None, capped_s=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
+    ``regen_cap_kw`` (per row, before the cold factor) and ``capped_s`` (time
+    spent at the regen limit) give ``regen_capped_kwh``.
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
     temperatures) and ``start_temperature_c`` (warm-up) default to the values
     at ``temperature_c``; ``parked_s`` (per row, NaN: soaked) scales the warm-up.
@@ -84,10 +111,16 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
     warm = np.zeros(n)
     cool = np.zeros(n)
     d_heat = d_warm = None
+    capped = np.zeros(n)
+    if capped_s is not None and regen_cap_kw is not None:
+        cs = np.broadcast_to(np.asarray(capped_s, dtype=float), (n,))
+        on = cs > 0  # inf * 0 would be NaN: only capped rows have a finite limit
+        capped[on] = np.broadcast_to(np.asarray(regen_cap_kw, float), (n,))[on] * cs[on] / 3600.0
     if veh.climate_model == "continuous":
         cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
+        capped = capped * regen
         t0 = t if start_temperature_c is None else start_temperature_c
         warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh, parked_s=parked_s),
                                (n,)).copy()
@@ -114,11 +147,12 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
         warmup_kwh=warm, cooling_kw=cool,
         moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0,
-        heating_offset_dkwh=d_heat, warmup_offset_dkwh=d_warm)
+        heating_offset_dkwh=d_heat, warmup_offset_dkwh=d_warm, regen_capped_kwh=capped,
+        regen_capped_h=None if capped_s is None else np.asarray(capped_s, float) / 3600.0)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
-                      profile="normal", temperature_c=20.0, grade_rad=0.0,
+                      profile="normal", temperature_c=20.0, grade_rad=0.0, soc=None,
                       _offset_grid: bool = True) -> PhysicsStats:
     """Statistics of uniformly sampled traces (same arguments as :func:`hybridev.trace_energy_kwh`).
 
@@ -131,6 +165,8 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     profile : DrivingProfile, str, or sequence of them (n_trips,)
     temperature_c : float or array_like (n_trips,), degC
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
+    soc : float or array_like (n_trips,), optional
+        State of charge at each trip's start (derates the regen limit).
 
     Returns
     -------
@@ -164,20 +200,28 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     else:
         th = np.broadcast_to(g, v.shape)
         th = 0.5 * (th[:, 1:] + th[:, :-1])
-    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh)
+    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
+    cap, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], soc, n)
+    thr = thr[:, None]
+    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh, thr[i:i + _SUB])
             for i in range(0, n, _SUB)]  # cache-sized blocks of trips
     sp, sn = ([np.concatenate([x[j][c] for x in sums]) for c in range(4)] for j in (0, 1))
+    capped_s = np.concatenate([x[2] for x in sums]) * dt[:, 0]
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
-    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
                      max_speed_kmh=v.max(axis=1) * 3.6,
-                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0], offset_grid=_offset_grid)
+                     moving_s=_moving_steps(v)[:, 0] * dt[:, 0], offset_grid=_offset_grid,
+                     regen_cap_kw=cap, capped_s=capped_s)
 
 
-def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams):
-    """(roll, aero, lin, rest) sums over driving and braking intervals of uniform traces, kWh.
+def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams,
+                thr_w=None):
+    """(roll, aero, lin, rest) sums over driving and (uncapped) braking intervals, kWh.
 
-    ``v`` (n, N + 1) m/s, ``dt`` (n, 1) s, ``th`` interval grades (n, 1) or (n, N) rad.
+    ``v`` (n, N + 1) m/s, ``dt`` (n, 1) s, ``th`` interval grades (n, 1) or (n, N) rad,
+    ``thr_w`` (n, 1) braking wheel power (W) above which regeneration is at
+    its limit (``inf`` or None: no limit). Returns ``[pos sums], [neg sums],
+    capped`` with ``capped`` the number of capped intervals per trace, (n,).
     Hot path: the sign of ``P_w`` is that of the road-load-plus-inertia force
     (``v > 0``; intervals with ``v = 0`` contribute nothing), and all signed
     sums come from one batched matrix product of per-interval moments with the
@@ -199,6 +243,9 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     force += (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th
     dv *= m / dt  # inertial force
     force += dv
+    cap = None
+    if thr_w is not None and np.isfinite(thr_w).any():
+        cap = force * vm < -thr_w  # braking wheel power beyond the regen limit
     v2 = np.multiply(vm, vm, out=a[:, k - 2])
     np.multiply(v2, vm, out=a[:, k - 1])
     dv *= vm
@@ -208,6 +255,10 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     mask = np.empty((n, 2, n_int))
     np.greater(force, 0.0, out=mask[:, 0])
     np.subtract(1.0, mask[:, 0], out=mask[:, 1])
+    n_capped = np.zeros(n)
+    if cap is not None:
+        n_capped = cap.sum(axis=1).astype(float)
+        mask[:, 1] -= cap  # capped braking: recovered P_lim dt, not in the sums
     s = np.matmul(a, mask.transpose(0, 2, 1))  # (n, k + 1, 2): sums over driving, braking
     c = dt / _J_PER_KWH  # (n, 1)
     if per_trip:
@@ -220,11 +271,12 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     lin = s[:, k - 2] * c
     rest = rest_grade + s[:, -1] * c
     comps = (roll, aero, lin, rest)
-    return [x[:, 0] for x in comps], [x[:, 1] for x in comps]
+    return [x[:, 0] for x in comps], [x[:, 1] for x in comps], n_capped
 
 
 def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
-                    profile="normal", temperature_c=None, parked_s=None) -> PhysicsStats:
+                    profile="normal", temperature_c=None, parked_s=None,
+                    soc=None) -> PhysicsStats:
     """Statistics of logged traces with a per-interval ``dt`` (no resampling).
 
     Interval ``k`` of a trip uses the mean of its two speed samples, the
@@ -245,6 +297,9 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     parked_s : float or array_like (n_trips,), s, optional
         Time parked before each trip (NaN or None: soaked to ambient); scales
         the warm-up (:func:`hybridev.physics.thermal.soak_fraction`).
+    soc : float or array_like (n_trips,), optional
+        State of charge at each trip's start (derates the regen limit);
+        default: the first logged ``soc`` sample, else unknown (no derating).
 
     Returns
     -------
@@ -257,16 +312,26 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     dt = traces.t_s[nxt] - traces.t_s[start]
     v = traces.speed_mps
     th = 0.5 * (traces.grade_rad[start] + traces.grade_rad[nxt])
-    comps, pos = _components(0.5 * (v[start] + v[nxt]), (v[nxt] - v[start]) / dt,
-                             np.cos(th), np.sin(th), dt, veh)
+    comps, pw_kwh = _components(0.5 * (v[start] + v[nxt]), (v[nxt] - v[start]) / dt,
+                                np.cos(th), np.sin(th), dt, veh)
+    pos = pw_kwh > 0
     n = len(traces)
+    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
+    if soc is None and traces.soc is not None:
+        soc = traces.soc[traces.offsets[:-1]]
+    cap_kw, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], soc, n)
+    neg = ~pos
+    capped_s = np.zeros(n)
+    if np.isfinite(thr).any():  # braking energy beyond the limit over the interval
+        capped = neg & (pw_kwh * _J_PER_KWH < -thr[trip] * dt)
+        neg &= ~capped
+        capped_s = np.bincount(trip, np.where(capped, dt, 0.0), minlength=n)
     sp = [np.bincount(trip, np.where(pos, c, 0.0), minlength=n) for c in comps]
-    sn = [np.bincount(trip, np.where(pos, 0.0, c), minlength=n) for c in comps]
+    sn = [np.bincount(trip, np.where(neg, c, 0.0), minlength=n) for c in comps]
     if temperature_c is None:
         temperature_c = (traces.per_trip_mean(traces.temperature_c)
                          if traces.temperature_c is not None else 20.0)
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
-    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     vmax = np.zeros(n)
     np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
     heat, cool, grid = _logged_climate_kw(traces, veh, start, trip, dt)
@@ -276,7 +341,8 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
                      climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
                      moving_s=moving,
                      parked_s=None if parked_s is None else np.broadcast_to(
-                         np.asarray(parked_s, float), (n,)), heating_grid_kw=grid)
+                         np.asarray(parked_s, float), (n,)), heating_grid_kw=grid,
+                     regen_cap_kw=cap_kw, capped_s=capped_s)
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
@@ -378,6 +444,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     modes[~kn] = alt_arr[k[~kn]]
     log_w = np.where(kn, 0.0, -np.log(n_alt))
     temp = trips["temperature_c"].to_numpy(float)
+    soc0 = (pd.to_numeric(trips["soc_initial"], errors="coerce").to_numpy(float).copy()
+            if "soc_initial" in trips.columns else np.full(n, np.nan))
+    capped_s = np.zeros(len(trip))
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
                else np.zeros(len(trip)))
@@ -388,9 +457,15 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     vmax = np.zeros(len(trip))
     rl = logged[trip]
     if rl.any():
-        sl = stats_from_logs(traces.select(keys[logged].astype(object)), vehicle=veh,
-                             temperature_c=temp[logged])
+        tr = traces.select(keys[logged].astype(object))
+        s_log = soc0[logged]
+        if tr.soc is not None:  # no soc_initial: the trace's first SoC sample
+            s_log = np.where(np.isfinite(s_log), s_log, tr.soc[tr.offsets[:-1]])
+        sl = stats_from_logs(tr, vehicle=veh, temperature_c=temp[logged],
+                             profile=list(modes[rl]), soc=s_log)
+        soc0[logged] = s_log
         src = np.cumsum(logged)[trip[rl]] - 1  # position among logged trips
+        capped_s[rl] = sl.regen_capped_h[src] * 3600.0
         for name in sums:
             sums[name][rl] = getattr(sl, name)[src]
         duration[rl] = sl.duration_h[src] * 3600.0
@@ -415,7 +490,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         dest = np.flatnonzero(~rl)
         for blk, v, dt, grade in _blocks(syn, n_steps, seed):
             s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
-                                  grade_rad=grade, _offset_grid=False)
+                                  grade_rad=grade, soc=soc0[trip[dest[blk]]],
+                                  _offset_grid=False)
+            capped_s[dest[blk]] = s.regen_capped_h * 3600.0
             for name in sums:
                 sums[name][dest[blk]] = getattr(s, name)
             duration[dest[blk]] = s.duration_h * 3600.0
@@ -426,7 +503,10 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
                     moving_s=moving, parked_s=None if parked is None else parked[trip],
-                    heating_grid_kw=heat_grid)
+                    heating_grid_kw=heat_grid,
+                    regen_cap_kw=_regen_threshold(veh, _profile_consts(list(modes), len(trip))[1],
+                                                  soc0[trip], len(trip))[0],
+                    capped_s=capped_s)
 
 
 def parked_seconds(trips: pd.DataFrame) -> np.ndarray | None:

@@ -34,6 +34,7 @@ from hybridev.physics.forces import (
     _interval_grade,
     _moving_steps,
     _wheel_power_w,
+    regen_limit_kw,
     soc_trajectory,
     trace_power_kw,
 )
@@ -228,12 +229,14 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     mult_eta = (prof["efficiency_multiplier"] * trac / veh.drivetrain_efficiency)[:, None]
     eta_r = (prof["regen_efficiency"] * regen)[:, None]
     aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
+    cap = np.broadcast_to(regen_limit_kw(veh, cols["soc_initial"]) * regen, (n,))[:, None]
     warm = veh.climate_model == "continuous"
     parked = cols["parked_min"] * 60.0 if "parked_min" in cols else None
     for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
-        energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl])
+        energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl],
+                                         cap[sl])
         if warm:
             energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh,
                                             parked_s=None if parked is None else parked[sl])
@@ -357,7 +360,7 @@ def trip_traces(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     parts = []
     for sl, v, dt, grade in _blocks(t, n_steps, seed):
         p = trace_power_kw(v, dt, vehicle=veh, profile=modes[sl], temperature_c=temp[sl],
-                           grade_rad=grade)
+                           grade_rad=grade, soc=s0[sl])
         soc = soc_trajectory(v, dt, s0[sl], vehicle=veh, profile=modes[sl],
                              temperature_c=temp[sl], grade_rad=grade)
         time = np.arange(n_steps + 1)[None, :] * dt[:, None]

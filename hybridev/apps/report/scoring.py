@@ -125,8 +125,8 @@ def _parameters(post) -> list[dict]:
 TERM_NAMES = ("rolling", "aerodynamic", "linear drag", "inertia and grade",
               "regen: rolling", "regen: aerodynamic", "regen: linear drag",
               "regen: inertia and grade", "auxiliary", "heating", "mode auxiliary",
-              "warm-up", "cooling", "drive loss")
-"""Names of the 14 energy terms of :meth:`hybridev.physics.stats.PhysicsStats.features`."""
+              "warm-up", "cooling", "drive loss", "regen at its power limit")
+"""Names of the 15 energy terms of :meth:`hybridev.physics.stats.PhysicsStats.features`."""
 
 
 def _discrepancy(model) -> list[dict] | None:
