@@ -202,12 +202,18 @@ class MeasuredTrips:
         The vehicle the trips were read and validated for (``vehicle=`` of
         :func:`read_measured_trips`), if one was given: ``HybridModel.fit``
         warns when its own vehicle is a different one.
+    elevation : pandas.DataFrame or None
+        Per accepted trace: sampling interval, where the grade came from,
+        GPS spikes removed, implausible grades and climbs flagged
+        (:func:`hybridev.data.timeseries.elevation_report`); None without a
+        time series. :func:`hybridev.data.quality.data_quality` summarises it.
     """
 
     trips: pd.DataFrame
     traces: LoggedTraces | None
     rejected: pd.DataFrame
     vehicle: VehicleParams | None = None
+    elevation: pd.DataFrame | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -221,7 +227,7 @@ class MeasuredTrips:
         if self.traces is not None:
             have = t["trip_id"].isin(self.traces.trip_id).to_numpy()
             tr = self.traces.select(t["trip_id"].to_numpy(object)[have])
-        return MeasuredTrips(t, tr, self.rejected, self.vehicle)
+        return MeasuredTrips(t, tr, self.rejected, self.vehicle, self.elevation)
 
 
 def _derive_from_traces(trips: pd.DataFrame, traces: LoggedTraces) -> pd.DataFrame:
@@ -278,14 +284,15 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
     if isinstance(timeseries, pd.DataFrame) and len(timeseries) == 0:
         raise ValueError("timeseries: the table has no rows; give logged samples or leave "
                          "the time series out")
-    traces, ts_rej = None, pd.DataFrame(columns=REJECTED_COLUMNS)
+    traces, ts_rej, elev = None, pd.DataFrame(columns=REJECTED_COLUMNS), None
     table, mismatch = trips, []
     if timeseries is not None:
         if not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
             raise ValueError("trips need a 'trip_id' column to be matched with a time series")
         trips, timeseries = harmonise_trip_ids(trips, timeseries)
-        traces, ts_rej = validate_timeseries(timeseries, min_samples=min_samples,
-                                             max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+        traces, ts_rej, elev = validate_timeseries(
+            timeseries, min_samples=min_samples, max_gap_s=max_gap_s,
+            grade_window_m=grade_window_m, report=True)
         match_traces(trips, traces, warn=False)
         mismatch = _trace_mismatch(trips, traces)
         table = _derive_from_traces(trips, traces)
@@ -330,7 +337,7 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
         match_traces(good, traces)
-    return MeasuredTrips(good, traces, rejected, vehicle)
+    return MeasuredTrips(good, traces, rejected, vehicle, elev)
 
 
 def read_measured_trips(trips_path: str | os.PathLike,
