@@ -14,8 +14,12 @@ commute back up, on one of three routes of 6-14 km with rolling hills.
   that differs from the nominal vehicle a user would build from its
   coast-down (:data:`HILLY_COASTDOWN`): lower regen limit (30 kW), lower
   efficiency, higher auxiliary and drive losses. Morning trips start
-  charged (SoC 0.88-1.0), where the regen limit is derated. The measured
-  energy is the truth times ``1 + noise_rel z`` (``z`` standard normal).
+  charged (SoC 0.88-1.0), where the regen limit is derated.
+* **Measured** energy as a phone app derives it from the car's SoC: the SoC
+  at both ends read to ``soc_resolution`` (0.5 %, a rounding error uniform
+  within one step at each end, times the 40 kWh capacity: sd 0.08 kWh per
+  trip), times ``1 + noise_rel z`` (``z`` standard normal, 3 %: the capacity
+  of an aged pack and the SoC estimator's own error).
 * **Logged** columns (``trip_id``, ``t_s``, ``speed_kmh``, ``elevation_m``,
   ``amb_temp_c``) every ``sample_s`` seconds; the altitude is GPS-like:
   the true altitude plus a slowly wandering bias (Ornstein-Uhlenbeck, sd
@@ -35,8 +39,8 @@ import pandas as pd
 from hybridev.physics.forces import trace_energy_kwh
 from hybridev.physics.params import LOGGED_PROFILE, VehicleParams
 
-__all__ = ["HILLY_COASTDOWN", "HILLY_NOISE_REL", "HILLY_TRUTH_VEHICLE", "HillyLogs",
-           "make_hilly_logs"]
+__all__ = ["HILLY_COASTDOWN", "HILLY_NOISE_REL", "HILLY_SOC_RESOLUTION", "HILLY_TRUTH_VEHICLE",
+           "HillyLogs", "make_hilly_logs"]
 
 HILLY_COASTDOWN = (160.0, 0.45, 0.027, 1750.0)
 """Coast-down ``A`` (N), ``B`` (N/(km/h)), ``C`` (N/(km/h)^2) and test mass (kg) of the
@@ -48,8 +52,11 @@ HILLY_TRUTH_VEHICLE = VehicleParams.from_coastdown(
     source="hybridev.physics.hilly: synthetic truth (differs from the nominal car)")
 """The car that produced the synthetic logs (unknown to the calibration)."""
 
-HILLY_NOISE_REL = 0.04
-"""Relative sd of the measured energy around the truth."""
+HILLY_NOISE_REL = 0.03
+"""Relative sd of the measured energy around the truth (besides the SoC rounding)."""
+
+HILLY_SOC_RESOLUTION = 0.005
+"""Resolution to which the synthetic app reads the state of charge (0.5 %)."""
 
 _GPS_BIAS_SD_M, _GPS_BIAS_TAU_S, _GPS_WHITE_SD_M = 3.0, 120.0, 1.0
 _SPIKE_PROB, _DT = 0.002, 1.0
@@ -134,7 +141,8 @@ def _drive(rng, length_m: float) -> np.ndarray:
 
 def make_hilly_logs(n_days: int = 60, *, seed: int = 0, sample_s: float = 5.0,
                     vehicle: VehicleParams = HILLY_TRUTH_VEHICLE,
-                    noise_rel: float = HILLY_NOISE_REL) -> HillyLogs:
+                    noise_rel: float = HILLY_NOISE_REL,
+                    soc_resolution: float = HILLY_SOC_RESOLUTION) -> HillyLogs:
     """Synthetic hilly commutes (two per day), logged every ``sample_s`` seconds.
 
     Parameters
@@ -148,6 +156,8 @@ def make_hilly_logs(n_days: int = 60, *, seed: int = 0, sample_s: float = 5.0,
         The truth car.
     noise_rel : float
         Relative sd of the measured energy.
+    soc_resolution : float
+        Resolution of the SoC readings the measured energy comes from (0: exact).
 
     Returns
     -------
@@ -168,6 +178,9 @@ def make_hilly_logs(n_days: int = 60, *, seed: int = 0, sample_s: float = 5.0,
         raise ValueError(f"sample_s={sample_s!r} must be a whole number of seconds >= 1")
     if not 0.0 <= noise_rel <= 0.5:
         raise ValueError(f"noise_rel={noise_rel!r} is outside the allowed range [0, 0.5]")
+    if not 0.0 <= soc_resolution <= 0.05:
+        raise ValueError(f"soc_resolution={soc_resolution!r} is outside the allowed range "
+                         "[0, 0.05]")
     rng = np.random.default_rng(seed)
     routes = [(length, drop, *_route(rng, length, drop)) for length, drop in
               zip(rng.uniform(6000.0, 14000.0, 3), rng.uniform(90.0, 220.0, 3), strict=True)]
@@ -214,5 +227,8 @@ def make_hilly_logs(n_days: int = 60, *, seed: int = 0, sample_s: float = 5.0,
             soc = max(soc - e / vehicle.battery_capacity_kwh, 0.05)
     truth = np.asarray(truth)
     trips = pd.DataFrame(rows)
-    trips.insert(5, "energy_kwh", truth * (1.0 + noise_rel * rng.standard_normal(len(truth))))
+    rounding = soc_resolution * (rng.random(len(truth)) - rng.random(len(truth)))
+    measured = (truth + rounding * vehicle.battery_capacity_kwh) * (
+        1.0 + noise_rel * rng.standard_normal(len(truth)))
+    trips.insert(5, "energy_kwh", np.maximum(measured, 0.05))
     return HillyLogs(trips, pd.concat(series, ignore_index=True), truth, np.asarray(net))
