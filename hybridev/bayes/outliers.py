@@ -5,8 +5,10 @@ trip at the posterior median parameters: the relative residual
 ``r = y / E - 1`` (``E`` floored at
 :data:`~hybridev.bayes.likelihood.PREDICTED_FLOOR_REL` of ``y``, as in the
 likelihood), minus its day's shrunken mean effect
-``u_g = tau^2 sum_g r / (sigma^2 + n_g tau^2)`` (the best linear predictor of
-the day random effect; 0 without groups), over the noise scale ``sigma``:
+``u_g = tau^2 sum_g w r / (sigma^2 + tau^2 sum_g w)`` (the best linear
+predictor of the day random effect, with the trips' Student-t weights ``w``
+iterated so that an outlier does not shift its day-mates; 0 without groups),
+over the noise scale ``sigma``:
 the standardized residual ``z``. Under the Student-t likelihood a trip's weight
 in the fit is ``w = (nu + 1) / (nu + z^2)`` (1 for a typical trip; the weight of
 the iteratively reweighted view of the t, Lange, Little & Taylor 1989), and its
@@ -87,9 +89,14 @@ def trip_residuals(trip_id, energy_kwh, predicted_kwh, sigma: float, *, group_sd
     u = np.zeros_like(r)
     if groups is not None and group_sd > 0:
         g = np.asarray(groups, dtype=np.intp)
-        n_g = np.bincount(g)
-        s_g = np.bincount(g, r)
-        u = (group_sd**2 * s_g / (sigma**2 + n_g * group_sd**2))[g]
+        w = np.ones_like(r)
+        for _ in range(20):  # iteratively reweighted: an outlier does not move its day
+            u = (group_sd**2 * np.bincount(g, w * r)
+                 / (sigma**2 + group_sd**2 * np.bincount(g, w)))[g]
+            if noise_dof is None:
+                break
+            zz = (r - u) / sigma
+            w = (noise_dof + 1.0) / (noise_dof + zz * zz)
     z = (r - u) / sigma
     if noise_dof is None:
         w = np.ones_like(z)

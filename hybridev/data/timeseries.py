@@ -47,10 +47,10 @@ noisy, so it is never differenced sample to sample. Two steps, both documented
 filters:
 
 1. *Despiking* (a Hampel-type filter): each sample is compared with the median
-   of the 5 samples centred on it (same trip); a sample more than
-   :data:`SPIKE_M` metres from it is replaced by that median. On a road that
-   climbs or falls monotonically the median is the sample itself, so real
-   grades are untouched; single GPS outliers are removed.
+   of its 4 neighbours (two on each side, same trip); a sample more than
+   :data:`SPIKE_M` metres from it is replaced by that median. On a road of
+   constant grade the median equals the sample, so real grades are
+   untouched; single GPS outliers are removed.
 2. *Slope*: the grade at each sample is the slope of a least-squares line of
    elevation against travelled distance over a window of ``grade_window_m``
    metres centred on the sample (a distance-based Savitzky-Golay filter of
@@ -97,7 +97,8 @@ MAX_GRADE = 0.30
 REJECTED_COLUMNS = ["source", "row", "trip_id", "field", "value", "reason"]
 
 SPIKE_M = 10.0
-"""Metres by which a sample must differ from its 5-sample median to count as a spike."""
+"""Metres by which a sample must differ from the median of its 4 neighbours to count as a
+spike (GPS altitude noise is a few metres; a real road changes less between samples)."""
 
 GRADE_MIN_SAMPLES = 2
 """Least number of samples on each side of the elevation-slope window."""
@@ -172,7 +173,7 @@ def _despike(code: np.ndarray, elev_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     i = np.arange(n)
     lo = np.searchsorted(code, code, side="left")
     hi = np.searchsorted(code, code, side="right") - 1
-    idx = np.clip(i[:, None] + np.arange(-2, 3)[None, :], lo[:, None], hi[:, None])
+    idx = np.clip(i[:, None] + np.array([-2, -1, 1, 2])[None, :], lo[:, None], hi[:, None])
     med = np.median(elev_m[idx], axis=1)
     spike = np.abs(elev_m - med) > SPIKE_M
     return np.where(spike, med, elev_m), spike
@@ -211,11 +212,11 @@ def _elevation_grades(code, dist, elev, window_m, uniq, n_k, dt_med):
     clean, spike = _despike(code, elev)
     grade = _grade_from_elevation(code, dist, clean, window_m)
     implausible = np.abs(np.tan(grade)) > MAX_PLAUSIBLE_GRADE
-    grade = np.where(implausible, 0.0, grade)
     n = len(uniq)
     same = np.r_[False, code[1:] == code[:-1]]
     dd = np.r_[0.0, np.diff(dist)] * same
-    dz = 0.5 * (np.tan(grade) + np.tan(np.r_[0.0, grade[:-1]])) * dd
+    dz = 0.5 * (np.tan(grade) + np.tan(np.r_[0.0, grade[:-1]])) * dd  # the climb implied
+    grade = np.where(implausible, 0.0, grade)
     jump = np.bincount(code, same & (np.abs(np.r_[0.0, np.diff(elev)]) > MAX_ALTITUDE_JUMP_M),
                        minlength=n) > 0
     climb = np.bincount(code, np.maximum(dz, 0.0), minlength=n)
@@ -251,7 +252,7 @@ def _elevation_grades(code, dist, elev, window_m, uniq, n_k, dt_med):
 
 def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
                         max_gap_s: float = 120.0, grade_window_m: float = 200.0,
-                        report: bool = False):
+                        report: bool = False, hidden_stop_and_go: bool = True):
     """Validate a logged time-series table and build per-trip traces.
 
     A trip is rejected (with one reason) when any sample has a non-finite or
@@ -272,6 +273,10 @@ def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
     report : bool
         Also return the per-trip elevation and sampling report
         (:func:`elevation_report`).
+    hidden_stop_and_go : bool
+        Estimate the stop-and-go energy coarse samples hide (:func:`hidden_pke`;
+        the default, for real logs). ``False`` when the energies were computed
+        on these very samples (a synthetic check), so that nothing is hidden.
 
     Returns
     -------
@@ -409,7 +414,7 @@ def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
             "between them (hybridev.data.timeseries.hidden_pke), and the calibration absorbs "
             "what the estimate misses; log at 1 Hz if you can",
             DataWarning, stacklevel=2)
-    hid = hidden_pke(code_k, t_k, v_k)
+    hid = hidden_pke(code_k, t_k, v_k) if hidden_stop_and_go else np.zeros(len(n_k))
     elev_rep["hidden_pke_j_per_kg"] = hid
     traces = LoggedTraces(
         trip_id=np.asarray(uniq, dtype=object)[~bad_trip], offsets=offsets, t_s=t_k,
