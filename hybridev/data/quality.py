@@ -128,12 +128,20 @@ def data_quality(measured: MeasuredTrips, outliers: pd.DataFrame | None = None) 
                   "climb_m", "descent_m", "net_elevation_m", "hidden_pke_j_per_kg"):
             out[c] = e[c].to_numpy()
         out["flags"] = e["elevation_flags"].fillna("").to_numpy(object)
-    else:
-        out["trace"] = False
+    else:  # no report (e.g. a MeasuredTrips built by hand): what the traces tell
+        tr = measured.traces
+        has = (np.zeros(len(ids), dtype=bool) if tr is None
+               else pd.Index(tr.trip_id).get_indexer(ids) >= 0)
+        out["trace"] = has
         for c in ("sampling_s", "max_abs_grade_pct", "climb_m", "descent_m", "net_elevation_m",
                   "hidden_pke_j_per_kg"):
             out[c] = np.nan
-        out["elevation_source"] = None
+        if tr is not None and has.any():
+            sub = tr.select(ids[has])
+            start, trip = sub.intervals()
+            dt = pd.Series(sub.t_s[start + 1] - sub.t_s[start]).groupby(trip).median()
+            out.loc[has, "sampling_s"] = dt.reindex(np.arange(len(sub))).to_numpy(float)
+        out["elevation_source"] = "not reported"
         out["n_spikes"] = out["n_implausible_grade"] = 0
         out["flags"] = ""
     out.loc[~out["trace"], "elevation_source"] = "synthesised trace (grade_pct or flat)"

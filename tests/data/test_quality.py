@@ -69,3 +69,11 @@ def test_no_timeseries_means_synthesised_traces():
     q = data_quality(measured_from_frames(t))
     assert q.totals["n_synthesised"] == 1 and not q.per_trip.trace.iloc[0]
     assert "synthesised" in q.text()
+
+
+def test_hand_built_measured_trips_still_count_their_traces(measured):
+    from hybridev.data.logs import MeasuredTrips
+
+    bare = MeasuredTrips(measured.trips, measured.traces, measured.rejected)
+    q = data_quality(bare)
+    assert q.totals["n_logged"] == 9 and q.totals["median_sampling_s"] == 5.0
