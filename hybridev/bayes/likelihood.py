@@ -3,12 +3,24 @@
 The log-likelihood is vectorised over walkers: a (n_walkers, n_params) block of
 parameters gives (n_walkers,) log-probabilities with one matrix product over the
 trips' sufficient statistics (hybridev.physics.stats).
+
+Residual: ``r = y / E_eff - 1`` with ``E_eff = max(E(theta), PREDICTED_FLOOR_REL * y)``
+(the Jacobian ``-log E_eff`` included). A prediction at or below a fifth of
+the measured energy (even <= 0, e.g. a descent with too much regeneration at
+these parameters) is thus a large, finite residual, never a zero likelihood:
+no trip can make the posterior vanish. The residual is Student-t with
+``nu = PhysicsPrior.noise_dof`` degrees of freedom (normal when ``None``);
+with groups, each group's residuals are multivariate t with scale matrix
+``sigma^2 I + tau^2 1 1^T`` (the day random effect), in closed form
+(Sherman-Morrison). Heavy tails bound the influence of any one trip: as its
+residual grows, its pull on the parameters vanishes.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.special import gammaln
 
 from hybridev.physics.stats import (
     HEATING_TERM,
@@ -18,7 +30,15 @@ from hybridev.physics.stats import (
     interp_offset,
 )
 
-__all__ = []
+__all__ = ["PREDICTED_FLOOR_REL"]
+
+PREDICTED_FLOOR_REL = 0.2
+"""Floor of the predicted energy in the residual, as a share of the measured energy."""
+
+
+def _log_t_norm(n, nu):
+    """Normalising constant of an n-variate t with nu dof (unit scale)."""
+    return gammaln(0.5 * (nu + n)) - gammaln(0.5 * nu) - 0.5 * n * np.log(nu * np.pi)
 
 
 class _LogPosterior:
@@ -77,6 +97,7 @@ class _LogPosterior:
         self.lo = np.array([s[3] for s in specs], dtype=float)
         self.hi = np.array([s[4] for s in specs], dtype=float)
         self.log_noise = np.log(prior.noise_rel_bounds)
+        self.nu = getattr(prior, "noise_dof", None)
         self.fixed = fixed
         self.shape = None
         if stats.marginalised:
@@ -95,6 +116,8 @@ class _LogPosterior:
             self.log_w = np.where(live.ravel(), 0.0 if infer_modes else self.log_w[idx], -np.inf)
             self.shape = live.shape
             self.unknown = (counts > 1).astype(float)
+        self.floor = PREDICTED_FLOOR_REL * self.y  # per row (padded layout when marginalised)
+        self.floor_trip = PREDICTED_FLOOR_REL * self.y_trip
         if infer_modes and (self.shape is None or self.shape[0] != 3):
             raise ValueError("missing_mode='infer' needs at least one trip without a mode "
                              "(its weights are learned from unlabelled trips)")
@@ -131,16 +154,21 @@ class _LogPosterior:
         ``eps_i ~ N(0, sigma^2)``: each group's residuals are jointly normal
         with covariance ``sigma^2 I + tau^2 1 1^T`` (Sherman-Morrison).
         """
+        e = np.maximum(e, self.floor_trip)
         r = self.y_trip / e - 1.0
         s2 = np.exp(2.0 * theta[:, -1])[:, None]
         t2 = (theta[:, -2] ** 2)[:, None]
         s1 = r @ self.G
         sq = (r * r) @ self.G
         den = s2 + self.n_g * t2
-        ll = -0.5 * (sq / s2 - t2 * s1 * s1 / (s2 * den))
-        ll -= 0.5 * ((self.n_g - 1.0) * np.log(s2) + np.log(den))
-        out = ll.sum(axis=1) - np.log(e).sum(axis=1) - 0.5 * self.n_trips * np.log(2 * np.pi)
-        return np.where((e > 0).all(axis=1), out, -np.inf)
+        q = sq / s2 - t2 * s1 * s1 / (s2 * den)  # Mahalanobis distance of each group
+        logdet = (self.n_g - 1.0) * np.log(s2) + np.log(den)
+        if self.nu is None:
+            ll = -0.5 * q - 0.5 * logdet - 0.5 * self.n_g * np.log(2 * np.pi)
+        else:  # multivariate t per group (closed form, same scale matrix)
+            ll = (_log_t_norm(self.n_g, self.nu) - 0.5 * logdet
+                  - 0.5 * (self.nu + self.n_g) * np.log1p(q / self.nu))
+        return ll.sum(axis=1) - np.log(e).sum(axis=1)
 
     def log_lik(self, theta: np.ndarray) -> np.ndarray:
         v = self.values(theta)
@@ -153,17 +181,22 @@ class _LogPosterior:
         if self.n_group:
             return self._group_log_lik(theta, e)
         log_sig = theta[:, -1]
-        # log N(y | e, (sigma e)^2) = -(y/e - 1)^2 / (2 sigma^2) - log e - log sigma - log(2 pi)/2,
-        # in place (hot path); e <= 0 has zero likelihood.
+        # log N(y | e, (sigma e)^2) = -(y/e - 1)^2 / (2 sigma^2) - log e - log sigma - log(2 pi)/2
+        # (Student t: -(nu + 1)/2 log(1 + z^2 / nu) + its constant), in place (hot path);
+        # e below the floor counts as the floor: a large but finite residual.
+        np.maximum(e, self.floor, out=e)
         ll = np.divide(self.y, e)
         ll -= 1.0
         ll *= ll
-        ll *= (-0.5 * np.exp(-2.0 * log_sig))[:, None]
+        if self.nu is None:
+            ll *= (-0.5 * np.exp(-2.0 * log_sig))[:, None]
+            const = self.n_trips * (-log_sig - 0.5 * np.log(2 * np.pi))
+        else:
+            ll *= (np.exp(-2.0 * log_sig) / self.nu)[:, None]
+            np.log1p(ll, out=ll)
+            ll *= -0.5 * (self.nu + 1.0)
+            const = self.n_trips * (-log_sig + _log_t_norm(1, self.nu))
         ll -= np.log(e)
-        bad = ~(e > 0)
-        if bad.any():
-            ll[bad] = -np.inf
-        const = self.n_trips * (-log_sig - 0.5 * np.log(2 * np.pi))
         if self.shape is None:
             return ll.sum(axis=1) + const
         ll += self.log_w

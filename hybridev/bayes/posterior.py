@@ -138,6 +138,25 @@ class PhysicsPosterior:
             if len(self.mode_weights) != len(self.samples):
                 raise ValueError("mode_weights must have one row per sample")
 
+    @property
+    def outliers_(self) -> pd.DataFrame:
+        """Trips the calibration treated as outliers, with the reason.
+
+        Columns :data:`hybridev.bayes.outliers.OUTLIER_COLUMNS` (``trip_id``,
+        ``energy_kwh`` measured, ``predicted_kwh`` at the posterior median,
+        ``residual_rel``, standardized residual ``z``, the trip's ``weight``
+        in the Student-t fit, ``tail_prob``, ``outlier``, ``reason``); empty
+        when none (or for a posterior made before outliers were reported).
+        """
+        from hybridev.bayes.outliers import OUTLIER_COLUMNS
+
+        return pd.DataFrame(self.diagnostics.get("outliers", []), columns=OUTLIER_COLUMNS)
+
+    @property
+    def noise_dof(self) -> float | None:
+        """Student-t degrees of freedom of the likelihood (``None``: normal)."""
+        return self.prior.get("noise_dof")
+
     @staticmethod
     def nominal_values(vehicle: VehicleParams) -> dict[str, float]:
         """Values of every ``STAT_PARAMS`` entry for ``vehicle`` (regen scale 1)."""
@@ -153,8 +172,12 @@ class PhysicsPosterior:
     @classmethod
     def from_sampler(cls, sampler, names, *, vehicle, reference_vehicle, prior, map_theta,
                      missing_mode, trace_steps, trace_seed, elapsed_s,
-                     n_group: int = 0) -> PhysicsPosterior:
-        """Burn-in (3 tau), thinning (tau/2) and diagnostics of an emcee run; warns if short."""
+                     n_group: int = 0, noise_dof: float | None = None) -> PhysicsPosterior:
+        """Burn-in (3 tau), thinning (tau/2) and diagnostics of an emcee run; warns if short.
+
+        With a Student-t likelihood (``noise_dof``) the noise and day-effect
+        scales are reported as standard deviations (``x sqrt(nu / (nu - 2))``).
+        """
         n_steps = int(sampler.iteration)
         tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
         tau_max = float(np.max(tau))
@@ -187,8 +210,9 @@ class PhysicsPosterior:
                           f"burn-in (tau_max={tau_max:.1f} steps, {n_steps} steps); at least "
                           f"{MIN_CHAIN_TAU:g} are needed for reliable estimates: run more steps",
                           ConvergenceWarning, stacklevel=3)
-        sigma = np.exp(chain[:, -1])
-        group_sd = chain[:, -2] if n_group else None
+        sd_factor = 1.0 if noise_dof is None else float(np.sqrt(noise_dof / (noise_dof - 2.0)))
+        sigma = np.exp(chain[:, -1]) * sd_factor
+        group_sd = np.abs(chain[:, -2]) * sd_factor if n_group else None
         if n_group:  # a trip on a new day: within-day noise plus a new day effect
             diag["sigma_within"] = float(np.median(sigma))
             diag["group_sd"] = float(np.median(group_sd))
@@ -344,7 +368,10 @@ class PhysicsPosterior:
             pick = np.clip(np.searchsorted(cw, u, side="right"), starts, ends)
             e = np.take_along_axis(e, pick, axis=1)
         if noise:
-            e = e * (1.0 + sig[:, None] * rng.standard_normal(e.shape))
+            dof = self.noise_dof
+            z = (rng.standard_normal(e.shape) if dof is None  # unit-variance t otherwise
+                 else rng.standard_t(dof, e.shape) * np.sqrt((dof - 2.0) / dof))
+            e = e * (1.0 + sig[:, None] * z)
         return e
 
     def predict_interval(self, stats: PhysicsStats, level: float = 0.9, *, n_draws: int = 4000,

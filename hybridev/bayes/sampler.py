@@ -10,9 +10,14 @@ probabilistic layer of the project):
   the relative noise ``sigma_rel``; the default set is the first five without
   ``b``;
 * priors (:class:`PhysicsPrior`) centred on the vehicle's nominal values;
-* likelihood: ``E_obs ~ N(E(theta), (sigma_rel E(theta))^2)`` per trip,
-  relative because trip energies span two orders of magnitude; ``E(theta) <= 0``
-  has zero likelihood;
+* likelihood: the relative residual ``E_obs / E(theta) - 1`` is Student-t
+  with scale ``sigma_rel`` and ``PhysicsPrior.noise_dof`` (4) degrees of
+  freedom (normal with ``noise_dof=None``), relative because trip energies
+  span two orders of magnitude; a prediction below a fifth of the measured
+  energy (even <= 0) counts as that floor, so no trip zeroes the posterior
+  and, with the heavy tails, no odd trip drags it
+  (:mod:`hybridev.bayes.likelihood`). The trips the fit treats as outliers,
+  and why, are in ``PhysicsPosterior.outliers_`` (:mod:`hybridev.bayes.outliers`);
 * trips without a ``mode``: by default the likelihood is the equal-weight
   mixture over the three profiles (log-sum-exp over modes, each with its own
   trace, efficiency multiplier, regen efficiency and mode auxiliary power);
@@ -44,7 +49,8 @@ import pandas as pd
 
 from hybridev.bayes.groups import AUTO_GROUP_COLUMNS, _group_codes, auto_group_labels, group_labels
 from hybridev.bayes.heater import select_heater_kind
-from hybridev.bayes.likelihood import _LogPosterior, _map_and_cov
+from hybridev.bayes.likelihood import PREDICTED_FLOOR_REL, _LogPosterior, _map_and_cov
+from hybridev.bayes.outliers import trip_residuals
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import (
     CLIMATE_PARAMS,
@@ -278,8 +284,9 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                      + [1.0] * n_alr + [pr.group_sd_scale] * n_group + [1.0])
     x0 = np.r_[[nominal[n] for n in names], np.zeros(n_alr), [0.5 * pr.group_sd_scale] * n_group]
     logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer, codes)
-    with np.errstate(all="ignore"):
-        s0 = float(np.sqrt(np.mean((y / energy_from_stats(stats) - 1.0) ** 2)))
+    with np.errstate(all="ignore"):  # robust start: median absolute relative residual
+        e0 = np.maximum(energy_from_stats(stats), PREDICTED_FLOOR_REL * y)
+        s0 = float(1.4826 * np.median(np.abs(y / e0 - 1.0)))
     s0 = np.clip(s0 if np.isfinite(s0) else 0.1,
                  *(np.array(pr.noise_rel_bounds) * [1.01, 0.99]))
     start = np.r_[x0, np.log(s0)]
@@ -297,10 +304,9 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
             stats = build(ref)
             logpost = _LogPosterior(stats, y, names, specs, pr, fixed, infer, codes)
             theta, cov = _map_and_cov(logpost, theta, scale)
-    if not np.isfinite(logpost(theta[None, :])[0]):
-        raise ValueError("the posterior is zero everywhere the optimiser looked: the physics "
-                         "predicts energy <= 0 for some measured trip at any plausible "
-                         "parameters (check grades, units and the trips' energy_kwh)")
+    if not np.isfinite(logpost(theta[None, :])[0]):  # the floored likelihood is finite
+        raise RuntimeError("the log posterior is not finite at its maximum (internal error: "
+                           "every measured trip has a finite likelihood); please report it")
     rng = np.random.default_rng(seed)
     if cov is None:
         cov = np.diag((1e-3 * scale) ** 2)
@@ -333,10 +339,31 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     post = PhysicsPosterior.from_sampler(
         sampler, names, vehicle=veh, reference_vehicle=ref, prior=pr, map_theta=theta,
         missing_mode=mm_out, trace_steps=trace_steps, trace_seed=trace_seed,
-        elapsed_s=time.perf_counter() - t0, n_group=n_group)
+        elapsed_s=time.perf_counter() - t0, n_group=n_group, noise_dof=pr.noise_dof)
     if heater is not None:
         post.diagnostics["heater"] = heater.to_dict()
+    _attach_outliers(post, stats, trips, y, codes, names, n_group, pr)
     return post
+
+
+def _attach_outliers(post: PhysicsPosterior, stats, trips: pd.DataFrame, y: np.ndarray, codes,
+                     names, n_group: int, prior: PhysicsPrior) -> None:
+    """Per-trip residuals at the posterior median; the outliers go to ``diagnostics``."""
+    med = post.median()
+    e = energy_from_stats(stats, post.as_params(np.array([[med[n] for n in names]])))[0]
+    d = post.diagnostics
+    dof = prior.noise_dof
+    sigma = d.get("sigma_within", med["noise_rel"])
+    tau = d.get("group_sd", 0.0) if n_group else 0.0
+    if dof is not None:  # back from the reported sds to the t's scales
+        sigma, tau = (x * np.sqrt((dof - 2.0) / dof) for x in (sigma, tau))
+    ids = trips["trip_id"].to_numpy(object) if "trip_id" in trips.columns else trips.index
+    res = trip_residuals(ids, y, e, sigma, group_sd=tau, groups=codes if n_group else None,
+                         noise_dof=dof)
+    flagged = res[res["outlier"]]
+    d["n_outliers"] = len(flagged)
+    d["outliers"] = [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+                     for row in flagged.to_dict(orient="records")]
 
 
 def simulate_measured(trips: pd.DataFrame, vehicle: VehicleParams | None = None,

@@ -202,12 +202,23 @@ class MeasuredTrips:
         The vehicle the trips were read and validated for (``vehicle=`` of
         :func:`read_measured_trips`), if one was given: ``HybridModel.fit``
         warns when its own vehicle is a different one.
+    elevation : pandas.DataFrame or None
+        Per accepted trace: sampling interval, where the grade came from,
+        GPS spikes removed, implausible grades and climbs flagged
+        (:func:`hybridev.data.timeseries.elevation_report`); None without a
+        time series. :func:`hybridev.data.quality.data_quality` summarises it.
+    derived : pandas.DataFrame or None
+        ``trip_id`` and ``derived`` (comma-separated names of the columns that
+        were missing or empty for the trip and were derived: from its trace,
+        or ``energy_kwh`` from the SoC), one row per accepted trip.
     """
 
     trips: pd.DataFrame
     traces: LoggedTraces | None
     rejected: pd.DataFrame
     vehicle: VehicleParams | None = None
+    elevation: pd.DataFrame | None = None
+    derived: pd.DataFrame | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -221,7 +232,11 @@ class MeasuredTrips:
         if self.traces is not None:
             have = t["trip_id"].isin(self.traces.trip_id).to_numpy()
             tr = self.traces.select(t["trip_id"].to_numpy(object)[have])
-        return MeasuredTrips(t, tr, self.rejected, self.vehicle)
+        d = self.derived
+        if d is not None:
+            d = d[d["trip_id"].isin(t["trip_id"]) if "trip_id" in t.columns
+                  else np.asarray(mask, dtype=bool)]
+        return MeasuredTrips(t, tr, self.rejected, self.vehicle, self.elevation, d)
 
 
 def _derive_from_traces(trips: pd.DataFrame, traces: LoggedTraces) -> pd.DataFrame:
@@ -255,8 +270,8 @@ def _derive_from_traces(trips: pd.DataFrame, traces: LoggedTraces) -> pd.DataFra
 
 def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = None,
                          vehicle: VehicleParams | None = None, *, min_samples: int = 10,
-                         max_gap_s: float = 120.0, grade_window_m: float = 200.0
-                         ) -> MeasuredTrips:
+                         max_gap_s: float = 120.0, grade_window_m: float = 200.0,
+                         hidden_stop_and_go: bool = True) -> MeasuredTrips:
     """Validate a measured-trip table and, optionally, its logged time series.
 
     See :func:`read_measured_trips`; this does the same on DataFrames.
@@ -278,14 +293,16 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
     if isinstance(timeseries, pd.DataFrame) and len(timeseries) == 0:
         raise ValueError("timeseries: the table has no rows; give logged samples or leave "
                          "the time series out")
-    traces, ts_rej = None, pd.DataFrame(columns=REJECTED_COLUMNS)
+    traces, ts_rej, elev = None, pd.DataFrame(columns=REJECTED_COLUMNS), None
     table, mismatch = trips, []
+    missing = _missing_columns(trips)
     if timeseries is not None:
         if not isinstance(trips, pd.DataFrame) or "trip_id" not in trips.columns:
             raise ValueError("trips need a 'trip_id' column to be matched with a time series")
         trips, timeseries = harmonise_trip_ids(trips, timeseries)
-        traces, ts_rej = validate_timeseries(timeseries, min_samples=min_samples,
-                                             max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+        traces, ts_rej, elev = validate_timeseries(
+            timeseries, min_samples=min_samples, max_gap_s=max_gap_s,
+            grade_window_m=grade_window_m, report=True, hidden_stop_and_go=hidden_stop_and_go)
         match_traces(trips, traces, warn=False)
         mismatch = _trace_mismatch(trips, traces)
         table = _derive_from_traces(trips, traces)
@@ -330,14 +347,36 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
         match_traces(good, traces)
-    return MeasuredTrips(good, traces, rejected, vehicle)
+    derived = None
+    if missing is not None:
+        have = good[[c for c in _DERIVABLE if c in good.columns]].notna()
+        miss = missing.reindex(good.index).fillna(False).astype(bool)
+        names = [[c for c in _DERIVABLE if c in have.columns and miss.at[i, c] and have.at[i, c]]
+                 for i in good.index]
+        derived = pd.DataFrame({
+            "trip_id": good["trip_id"].to_numpy(object) if "trip_id" in good.columns
+            else good.index.to_numpy(), "derived": [", ".join(n) for n in names]})
+    return MeasuredTrips(good, traces, rejected, vehicle, elev, derived)
+
+
+_DERIVABLE = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "soc_final",
+              "energy_kwh")
+
+
+def _missing_columns(trips) -> pd.DataFrame | None:
+    """Per row: which derivable columns are absent or empty in the user's table."""
+    if not isinstance(trips, pd.DataFrame):
+        return None
+    return pd.DataFrame({c: (trips[c].isna().to_numpy() if c in trips.columns
+                             else np.ones(len(trips), dtype=bool)) for c in _DERIVABLE},
+                        index=trips.index)
 
 
 def read_measured_trips(trips_path: str | os.PathLike,
                         timeseries_path: str | os.PathLike | None = None,
                         vehicle: VehicleParams | None = None, *, min_samples: int = 10,
-                        max_gap_s: float = 120.0, grade_window_m: float = 200.0
-                        ) -> MeasuredTrips:
+                        max_gap_s: float = 120.0, grade_window_m: float = 200.0,
+                        hidden_stop_and_go: bool = True) -> MeasuredTrips:
     """Load and validate measured trips (CSV or Parquet) and their logged time series.
 
     The trip table is checked by
@@ -360,7 +399,7 @@ def read_measured_trips(trips_path: str | os.PathLike,
         ``.csv`` or ``.parquet`` files.
     vehicle : VehicleParams, optional
         Battery capacity for energy derived from SoC.
-    min_samples, max_gap_s, grade_window_m
+    min_samples, max_gap_s, grade_window_m, hidden_stop_and_go
         See :func:`validate_timeseries`.
 
     Returns
@@ -383,4 +422,5 @@ def read_measured_trips(trips_path: str | os.PathLike,
     trips = read_table(trips_path, text_columns=ids)
     ts = None if timeseries_path is None else read_table(timeseries_path, text_columns=ids)
     return measured_from_frames(trips, ts, vehicle, min_samples=min_samples,
-                                max_gap_s=max_gap_s, grade_window_m=grade_window_m)
+                                max_gap_s=max_gap_s, grade_window_m=grade_window_m,
+                                hidden_stop_and_go=hidden_stop_and_go)

@@ -283,6 +283,10 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     Interval ``k`` of a trip uses the mean of its two speed samples, the
     acceleration ``(v_{k+1} - v_k) / (t_{k+1} - t_k)`` and the mean of the two
     sample grades, exactly as :mod:`hybridev.physics.forces` does for constant ``dt``.
+    A coarse log's hidden stop-and-go (``traces.hidden_pke_j_per_kg``, from
+    :mod:`hybridev.data.timeseries`) adds ``m x hidden`` to the inertial energy
+    of the driving intervals and as much to that of the braking ones
+    (``rest_pos``, ``rest_neg``): it costs ``(mult / eta_d - eta_r) m x hidden``.
 
     Parameters
     ----------
@@ -329,6 +333,10 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
         capped_s = np.bincount(trip, np.where(capped, dt, 0.0), minlength=n)
     sp = [np.bincount(trip, np.where(pos, c, 0.0), minlength=n) for c in comps]
     sn = [np.bincount(trip, np.where(neg, c, 0.0), minlength=n) for c in comps]
+    if traces.hidden_pke_j_per_kg is not None:  # stop-and-go a coarse log hides: spent in
+        hid = veh.mass_kg * traces.hidden_pke_j_per_kg / _J_PER_KWH  # traction, regenerated
+        sp[3] = sp[3] + hid
+        sn[3] = sn[3] - hid
     if temperature_c is None:
         temperature_c = (traces.per_trip_mean(traces.temperature_c)
                          if traces.temperature_c is not None else 20.0)

@@ -31,6 +31,13 @@ class LoggedTraces:
         Zero when neither elevation nor grade was logged.
     temperature_c : numpy.ndarray, shape (n_samples,), degC, or None
     soc : numpy.ndarray, shape (n_samples,), or None
+    hidden_pke_j_per_kg : numpy.ndarray, shape (n_trips,), J/kg, or None
+        Positive kinetic energy per kg of vehicle that a coarse log hides
+        between its samples (stop-and-go the straight speed ramps smooth
+        away), estimated by :mod:`hybridev.data.timeseries`; the statistics
+        (:func:`hybridev.physics.stats_build.stats_from_logs`) add it as
+        inertial energy spent in traction and returned (partly) by
+        regeneration. None: nothing hidden (1 Hz logs).
     """
 
     trip_id: np.ndarray
@@ -40,6 +47,7 @@ class LoggedTraces:
     grade_rad: np.ndarray
     temperature_c: np.ndarray | None = None
     soc: np.ndarray | None = None
+    hidden_pke_j_per_kg: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.trip_id)
@@ -93,4 +101,6 @@ class LoggedTraces:
             return None if a is None else a[idx]
 
         return LoggedTraces(ids, offsets, self.t_s[idx], self.speed_mps[idx],
-                            self.grade_rad[idx], take(self.temperature_c), take(self.soc))
+                            self.grade_rad[idx], take(self.temperature_c), take(self.soc),
+                            None if self.hidden_pke_j_per_kg is None
+                            else self.hidden_pke_j_per_kg[pos])
