@@ -198,6 +198,13 @@ class TermDiscrepancy:
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> TermDiscrepancy:
         """Inverse of :meth:`to_arrays` (``ValueError`` on missing or bad arrays)."""
+        arrays = dict(arrays)
+        if np.asarray(arrays.get("weights", ())).size == N_TERMS - 1:
+            # saved before the regen-limit term (the last one): that term is zero for
+            # the vehicles of such files (no limit), so it joins inactive at weight 1
+            for key, pad in (("weights", 1.0), ("active", False), ("upper", np.inf)):
+                if key in arrays:
+                    arrays[key] = np.append(np.asarray(arrays[key]).reshape(-1), pad)
         try:
             return cls(arrays["weights"], arrays["cov"], arrays["active"],
                        float(np.asarray(arrays["shrinkage"]).reshape(-1)[0]),
