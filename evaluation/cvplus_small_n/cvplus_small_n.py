@@ -40,8 +40,9 @@ in-domain ones:
   emcee steps (Monte Carlo noise of the short fold chains).
 
 Writes ``cvplus_small_n.md`` and ``.json`` to ``--out`` (default: this folder).
-Uses private methods of ``HybridModel`` (``_distributions``, ``_cv_nets``), which
-is why it is a study here and not a library feature.
+Uses the model's raw distributions (:func:`hybridev.learning.pipeline.raw_distributions`)
+and its calibrator's fold ensembles, which is why it is a study here and not a library
+feature.
 """
 
 from __future__ import annotations

@@ -63,7 +63,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.components import new_physics
+from hybridev.learning.components import physics_of
 from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
@@ -93,7 +93,7 @@ class _Parts:
     @classmethod
     def of(cls, model) -> _Parts:
         state = model.__dict__  # the components themselves: no call back into the model
-        stage = state.get("physics_") or new_physics(model)
+        stage = physics_of(model)
         fitted = hasattr(state.get("learner_"), "net_")
         info = state.get("fit_info_") or {}
         post = stage.posterior_
