@@ -22,8 +22,8 @@ from hybridev.learning.physics_stage import PhysicsStage
 from hybridev.learning.residual import ResidualLearner
 from hybridev.physics.params import VehicleParams
 
-__all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "require_fitted",
-           "require_probabilistic", "restore"]
+__all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "physics_of",
+           "require_fitted", "require_probabilistic", "restore"]
 
 NAMES = ("physics", "learner", "domain", "calibrator")
 """The components, in the order a fit makes them (attributes ``physics_``, ...)."""
@@ -73,6 +73,15 @@ def new_physics(model) -> PhysicsStage:
         physics_params=model.physics_params,
         calibrate=bool(model.calibrate_physics) and model._residual,
         discrepancy=bool(model.discrepancy), relative=model.residual_target == "relative")
+
+
+def physics_of(model) -> PhysicsStage:
+    """``model``'s fitted physics stage (with the model's current ``vehicle``, e.g. another
+    battery capacity set after loading), or an unfitted one of its settings."""
+    stage = model.__dict__.get("physics_")
+    if stage is None:
+        return new_physics(model)
+    return stage.for_vehicle(model.vehicle or _PAPER_VEHICLE)
 
 
 def new_learner(model) -> ResidualLearner:

@@ -63,7 +63,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.components import new_physics
+from hybridev.learning.components import physics_of
 from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
@@ -87,22 +87,25 @@ class _Parts:
     calibrator: object  # Calibrator or None
     n_draws: int
     distance_range: list | None
-    noise_rel: float
     trace_gap_rel: float
+
+    def ood(self) -> OutOfDomainSpread:
+        """Step 6's component: the posterior's median relative noise, the trace gap."""
+        post = self.stage.posterior_
+        return OutOfDomainSpread(
+            noise_rel=float(np.median(post.noise_rel)) if post is not None else 0.0,
+            trace_gap_rel=self.trace_gap_rel)
 
     @classmethod
     def of(cls, model) -> _Parts:
         state = model.__dict__  # the components themselves: no call back into the model
-        stage = state.get("physics_") or new_physics(model)
+        stage = physics_of(model)
         fitted = hasattr(state.get("learner_"), "net_")
         info = state.get("fit_info_") or {}
-        post = stage.posterior_
         return cls(stage, stage.vehicle(), state["learner_"] if fitted else None,
                    state.get("domain_") if fitted else None,
                    state.get("calibrator_"), int(model.n_posterior_draws),
-                   info.get("distance_km_range"),
-                   float(np.median(post.noise_rel)) if post is not None else 0.0,
-                   float(info.get("trace_gap_rel", 0.0)))
+                   info.get("distance_km_range"), float(info.get("trace_gap_rel", 0.0)))
 
     def folds(self) -> tuple[list, list]:
         """The CV+ fold ensembles and their physics (None: the model's), or ``([], [])``."""
@@ -201,15 +204,15 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
         modes=True, warn=True)
     raw = raw_prediction(draws.tables[0], dists, mode_means)
-    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
+        per_trip = parts.ood().spread_factor(assessment, raw, factor)  # 6 out-of-domain
         d = raw.dist
         return EnergyDistribution(d.physics_draws_kwh, d.residual_mean_kwh, d.residual_std_kwh,
-                                  spread_factor=ood.spread_factor(assessment, raw, factor))  # 6
+                                  spread_factor=per_trip)
     ok = np.ones(len(raw.mean), dtype=bool) if assessment is None else assessment.in_domain
     calibrated = parts.calibrator.calibrate(raw, level, ok)  # 5 calibrator
-    wide, confidence = ood.widen(assessment, raw, calibrated, level)  # 6 out-of-domain
+    wide, confidence = parts.ood().widen(assessment, raw, calibrated, level)  # 6 out-of-domain
     score = np.zeros(len(ok)) if assessment is None else assessment.score
     return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
                             residual=parts.learner.residual)
@@ -275,7 +278,5 @@ def ood_sd(model, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray, var_draws
         return np.stack([learner.point(physics_draws(model, sub.assign(mode=m), traces)[0],
                                        dom) for m in MODE_NAMES])
 
-    parts = _Parts.of(model)
-    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
-    sd_ood = ood.sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
+    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
     return assessment.score, assessment.in_domain, sd_ood
