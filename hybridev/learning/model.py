@@ -42,6 +42,7 @@ from hybridev.learning.components import (
     require_probabilistic,
 )
 from hybridev.learning.features import FEATURE_NAMES
+from hybridev.learning.fit_notes import fit_notes
 from hybridev.learning.inputs import _check_range, unpack_trips
 from hybridev.learning.ood import trace_gap
 from hybridev.learning.params import (
@@ -87,12 +88,20 @@ class HybridModel(RefitGuardMixin, HybridParams):
         The conformal step (:class:`~hybridev.learning.calibrate.Calibrator`); its
         state is also ``conformal_`` (None when ``conformal_fraction=0``),
         ``cv_nets_``, ``cv_physics_``, ``mondrian_cut_km_`` and ``conformal_bins_``.
+    gate_ : ResidualGate
+        The stacking gate (:mod:`hybridev.learning.gate`): the share ``weight_`` in
+        [0, 1] of the residual correction kept, chosen on out-of-fold trips (also
+        ``learner_.gate_``); its evidence is ``fit_info_["residual_gate"]``.
     fit_info_ : dict
         Trip counts, seed, fit time, validation-set errors, ``distance_km_range``
         (shortest and longest fitting trip, km; past them the residual is held,
         :mod:`hybridev.learning.residual`), ``heater`` when the heater kind was
         learned (:mod:`hybridev.bayes.heater`), ``trace_gap_rel`` when fitted on
-        logged traces (:mod:`hybridev.learning.ood`).
+        logged traces (:mod:`hybridev.learning.ood`), ``residual_gate`` (the gate's
+        weight and out-of-fold MAPE of the physics, the ungated and the gated hybrid),
+        ``outliers`` (trips the Student-t likelihood treats as outliers, with their
+        reasons) and ``data_quality`` (totals of
+        :func:`hybridev.data.quality.data_quality`, when fitted on logged traces).
 
     Examples
     --------
@@ -219,7 +228,7 @@ class HybridModel(RefitGuardMixin, HybridParams):
         t0 = time.perf_counter()
         good, traces, table = fitting.fit_inputs(self, measured_trips, timeseries)
         split = fitting.split_trips(self, good, table, groups, seed)
-        for attr in ("physics_", "learner_", "domain_", "calibrator_"):
+        for attr in ("physics_", "learner_", "domain_", "calibrator_", "gate_"):
             self.__dict__.pop(attr, None)
         # 1. physics: heater kind, posterior and discrepancy (calibration trips held out)
         self.physics_, heater = fitting.fit_physics(self, good, split, traces, seed)
@@ -236,6 +245,7 @@ class HybridModel(RefitGuardMixin, HybridParams):
                                                     (xs, e_meas, e_phys, scale))
         if traces is not None and self.domain_.needs_trace:
             info["trace_gap_rel"] = trace_gap(self, good, e_meas, traces)  # learning.ood
+        info.update(fit_notes(measured_trips, self.physics_.posterior_))  # outliers, data
         info["fit_seconds"] = fitting.elapsed(t0)
         return self
 
