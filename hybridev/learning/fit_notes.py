@@ -11,12 +11,16 @@ and the command line show them.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import pandas as pd
 
 __all__ = ["MAX_LISTED", "fit_notes", "outlier_notes", "quality_notes"]
 
 MAX_LISTED = 50
 """At most this many outlier trips are listed (``n_outliers`` counts them all)."""
+_REJECTED = ["source", "row", "trip_id", "field", "value", "reason"]
 
 
 def _plain(v):
@@ -53,6 +57,10 @@ def quality_notes(measured, posterior=None) -> dict | None:
 
     if not isinstance(measured, MeasuredTrips):
         return None
+    rej = measured.rejected
+    if rej is None or not set(_REJECTED) <= set(rej.columns):  # a MeasuredTrips made by hand
+        measured = dataclasses.replace(measured, rejected=pd.DataFrame(
+            rej if rej is not None else None).reindex(columns=_REJECTED))
     outliers = None if posterior is None else posterior.outliers_
     totals = data_quality(measured, outliers).totals
     return {k: ({str(a): _plain(b) for a, b in v.items()} if isinstance(v, dict) else _plain(v))

@@ -74,7 +74,7 @@ def test_fit_derives_summaries_from_traces(logger, tmp_path, capsys):
     assert "derived: " in printed and "distance_km" in printed
     m = HybridModel.load(out)
     assert m.fit_info_["data_quality"]["n_logged"] == m.fit_info_["n_trips"]
-    assert m.fit_info_["outliers"]["n_outliers"] == len(m.fit_info_["outliers"]["trips"])
+    assert "outliers" not in m.fit_info_  # --no-calibrate-physics: no posterior
     assert m.capacity_kwh == 50.0 and m._vehicle().mass_kg == 1500.0
     pred = tmp_path / "p.parquet"
     assert main(["predict", str(out), str(logger / "bare.csv"), "--timeseries",
