@@ -26,8 +26,8 @@ import argparse
 
 __all__ = ["TABLE_SUFFIXES", "add_input_arguments", "add_vehicle_arguments",
            "apply_columns", "column_mapping",
-           "fill_soc_initial", "hint_missing_soc", "model_with_vehicle", "read_trips",
-           "report_rejected", "vehicle_from_args"]
+           "fill_soc_initial", "hint_missing_soc", "model_with_vehicle", "print_data_quality",
+           "read_trips", "report_rejected", "vehicle_from_args"]
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 
@@ -174,13 +174,16 @@ def hint_missing_soc(exc: ValueError) -> ValueError:
 
 
 def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
-               strict: bool | None = None):
+               strict: bool | None = None, whole: bool = False):
     """Read a trip table with the shared options: (table, traces or None, rejected or None).
 
     ``measured``: a measured-trip table (validated by
     :func:`hybridev.data.logs.measured_from_frames`, rejected rows reported);
     else a trip table to predict on (summaries derived from the traces).
     ``strict`` (default ``measured``): every ``--columns`` source must exist.
+    ``whole`` (measured only): return the whole
+    :class:`~hybridev.data.logs.MeasuredTrips` (its elevation and derived-column
+    reports too, for :func:`print_data_quality`) instead of the three parts.
     """
     from hybridev.core.fileio import read_table
 
@@ -215,6 +218,10 @@ def read_trips(path, args: argparse.Namespace, *, measured: bool, vehicle=None,
             rejected = m.rejected
             if rejected is not None and len(rejected):
                 rejected = rejected.assign(reason=rejected["reason"].map(miles_hint))
+            if whole:
+                import dataclasses
+
+                return dataclasses.replace(m, rejected=rejected)
             return m.trips, m.traces, rejected
         if ts is None:
             return table, None, None
@@ -271,3 +278,17 @@ def report_rejected(command: str, source: str, rejected, limit: int = 10) -> Non
         print(f"  {getattr(r, 'source', 'trips')} {where}: {r.reason}", file=sys.stderr)
     if len(rejected) > limit:
         print(f"  ... and {len(rejected) - limit} more", file=sys.stderr)
+
+
+def print_data_quality(measured) -> None:
+    """Print the short data-quality block (:func:`hybridev.data.quality.data_quality`) of a
+    :class:`~hybridev.data.logs.MeasuredTrips` or a validated table, before the fit."""
+    import pandas as pd
+
+    from hybridev.data.logs import MeasuredTrips
+    from hybridev.data.quality import data_quality
+
+    if isinstance(measured, pd.DataFrame):  # a table read without traces: nothing rejected
+        measured = MeasuredTrips(measured, None, pd.DataFrame(columns=[
+            "source", "row", "trip_id", "field", "value", "reason"]))
+    print(data_quality(measured).text(), flush=True)

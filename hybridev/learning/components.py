@@ -16,6 +16,7 @@ from sklearn.exceptions import NotFittedError
 from hybridev.learning.calibrate import Calibrator
 from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_calibration_level
 from hybridev.learning.params import feature_names
 from hybridev.learning.physics_stage import PhysicsStage
@@ -25,7 +26,7 @@ from hybridev.physics.params import VehicleParams
 __all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "physics_of",
            "require_fitted", "require_probabilistic", "restore"]
 
-NAMES = ("physics", "learner", "domain", "calibrator")
+NAMES = ("physics", "learner", "domain", "calibrator", "gate")
 """The components, in the order a fit makes them (attributes ``physics_``, ...)."""
 
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
@@ -95,6 +96,8 @@ def restore(model, parts: dict, fit_info: dict) -> None:
     """Set ``model``'s components from their saved ``{name: (doc, arrays)}``."""
     physics = new_physics(model).set_arrays(*parts["physics"])
     learner = new_learner(model).set_arrays(*parts["learner"])
+    # the stacking gate; models saved before it have none: weight 1, predictions unchanged
+    model.gate_ = learner.gate_ = ResidualGate().set_arrays(*parts.get("gate", ({}, {})))
     dom = parts["domain"][1]
     model.domain_ = TrainingDomain.from_arrays(dom) if dom else None
     model.calibrator_ = Calibrator(mondrian=model.mondrian).set_arrays(

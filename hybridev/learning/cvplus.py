@@ -60,8 +60,8 @@ poorly determined whatever the number of trips)."""
 
 def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.ndarray,
                 xs: np.ndarray, ys: np.ndarray, e_meas: np.ndarray, seed: int,
-                ss: np.random.SeedSequence, *, cv_folds: int, val_fraction: float
-                ) -> tuple[list, list, CVPlusConformal]:
+                ss: np.random.SeedSequence, *, cv_folds: int, val_fraction: float,
+                gate=None) -> tuple[list, list, CVPlusConformal]:
     """Train the fold ensembles: ``(fold_nets, fold_physics, conformal)``.
 
     Parameters
@@ -89,6 +89,10 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
     cv_folds : int
     val_fraction : float
         Early-stopping share of each fold's training trips.
+    gate : ResidualGate, optional
+        Fitted here on the folds' predictions of their held-out trips
+        (:mod:`hybridev.learning.gate`); the scores are then those of the gated
+        predictions, as the fold ensembles give them at prediction time.
     """
     split_ss, torch_ss = ss.spawn(2)
     rng = np.random.default_rng(split_ss)
@@ -121,9 +125,15 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
         nets.append(net)
         fold_physics.append(phys)
     dists = raw_distributions(good, traces, int(seed), nets, fold_physics)
+    idx = np.arange(len(e_meas))
+    if gate is not None:  # the stacking gate on the out-of-fold predictions
+        p_oof = np.stack([d.physics_draws_kwh.mean(axis=0) for d in dists])[fold, idx]
+        r_oof = np.stack([d.residual_mean_kwh.mean(axis=0) for d in dists])[fold, idx]
+        gate.fit(e_meas, p_oof, r_oof, good["distance_km"].to_numpy(float), codes,
+                 source="cv+")
+        dists = [gate.gated(d) for d in dists]
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
-    idx = np.arange(len(e_meas))
     return (nets, fold_physics if post is not None else [],
             CVPlusConformal((e_meas - mu[fold, idx]) / sd[fold, idx], fold))
 

@@ -28,13 +28,14 @@ from hybridev.learning.components import new_learner, new_physics
 from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
 from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.features import trip_features
+from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.splits import group_codes, group_holdout
 
-__all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_inputs", "fit_learner", "fit_physics",
-           "fit_summary", "split_trips"]
+__all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
+           "fit_physics", "fit_summary", "split_trips"]
 
 
 @dataclass(frozen=True)
@@ -168,17 +169,34 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
     record the Mondrian bins (cut at the fitting trips' median distance).
     """
     cal = Calibrator(mondrian=model.mondrian)
+    gate = ResidualGate() if model.learner_.residual else None  # hybridev.learning.gate
     if len(split.cal):
         dist = raw_distributions(model, good.iloc[split.cal], traces, seed=int(seed))[0][0]
+        dist = fit_gate(model, gate, good, split, e_meas, dist, split.cal, "split")
         cal.fit_split(e_meas[split.cal], dist.mean(), dist.std())
     elif split.mode == "cv+":
         cal.set_cv_plus(*fit_cv_plus(
             model.physics_, model.learner_, lambda t, tr, s, nets, ph: raw_distributions(
                 model, t, tr, seed=s, nets=nets, physics=ph)[0],
             good, traces, split.codes, xs, ys, e_meas, seed, split.cv_ss,
-            cv_folds=int(model.cv_folds), val_fraction=model.val_fraction))
+            cv_folds=int(model.cv_folds), val_fraction=model.val_fraction, gate=gate))
+    elif len(split.val) and gate is not None:  # no calibration trips: the validation ones
+        dist = raw_distributions(model, good.iloc[split.val], traces, seed=int(seed))[0][0]
+        fit_gate(model, gate, good, split, e_meas, dist, split.val, "validation")
+    model.gate_ = model.learner_.gate_ = gate or ResidualGate()
     warn_calibration(cal.conformal_, split.codes, split.cal)
     return cal.fit_bins(good.iloc[split.cal] if len(split.cal) else good, good)
+
+
+def fit_gate(model, gate, good: pd.DataFrame, split: FitSplit, e_meas: np.ndarray, dist,
+             rows: np.ndarray, source: str):
+    """Fit the stacking ``gate`` on the ungated raw distribution ``dist`` of the held-out
+    ``rows`` and return it gated (``gate`` None: ``dist`` unchanged)."""
+    if gate is None:
+        return dist
+    gate.fit_distributions(e_meas[rows], [dist], good["distance_km"].to_numpy(float)[rows],
+                           split.codes[rows], source=source)
+    return gate.gated(dist)
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
@@ -199,6 +217,8 @@ def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
             "n_parameters_per_member": model.learner_.n_parameters_}
     if heater is not None:
         info["heater"] = heater.to_dict()
+    if getattr(model, "gate_", None) is not None:
+        info["residual_gate"] = model.gate_.summary()
     if "parked_min" in good.columns:  # parking time (from start_time): what the fit saw
         pk = pd.to_numeric(good["parked_min"], errors="coerce").to_numpy(float)
         info["parking"] = {"n_known": int(np.isfinite(pk).sum()),

@@ -32,7 +32,7 @@ from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
-from hybridev.learning import fitting
+from hybridev.learning import fit_notes, fitting
 from hybridev.learning.components import (
     NAMES,
     Part,
@@ -87,12 +87,15 @@ class HybridModel(RefitGuardMixin, HybridParams):
         The conformal step (:class:`~hybridev.learning.calibrate.Calibrator`); its
         state is also ``conformal_`` (None when ``conformal_fraction=0``),
         ``cv_nets_``, ``cv_physics_``, ``mondrian_cut_km_`` and ``conformal_bins_``.
+    gate_ : ResidualGate
+        The stacking gate (:mod:`hybridev.learning.gate`; also ``learner_.gate_``).
     fit_info_ : dict
-        Trip counts, seed, fit time, validation-set errors, ``distance_km_range``
-        (shortest and longest fitting trip, km; past them the residual is held,
-        :mod:`hybridev.learning.residual`), ``heater`` when the heater kind was
-        learned (:mod:`hybridev.bayes.heater`), ``trace_gap_rel`` when fitted on
-        logged traces (:mod:`hybridev.learning.ood`).
+        Trip counts, seed, fit time, validation-set errors, ``distance_km_range`` (shortest
+        and longest fitting trip, km; past them the residual is held,
+        :mod:`hybridev.learning.residual`), ``heater`` when the heater kind was learned
+        (:mod:`hybridev.bayes.heater`), ``trace_gap_rel`` when fitted on logged traces
+        (:mod:`hybridev.learning.ood`), ``residual_gate`` (its evidence), ``outliers`` and
+        ``data_quality`` (:mod:`hybridev.learning.fit_notes`).
 
     Examples
     --------
@@ -174,25 +177,23 @@ class HybridModel(RefitGuardMixin, HybridParams):
         measured_trips : pandas.DataFrame
             A measured-trip table (:func:`hybridev.data.measured.validate_measured_trips`):
             trip columns plus ``energy_kwh`` (kWh) and/or ``soc_final``. With a
-            ``start_time`` column and no ``parked_min``, the minutes parked
-            before each trip are derived from the table
-            (:mod:`hybridev.data.parked`): a trip after a short stop starts
-            with a warm cabin.
+            ``start_time`` column and no ``parked_min``, the minutes parked before each
+            trip are derived from the table (:mod:`hybridev.data.parked`): a trip after
+            a short stop starts with a warm cabin.
         seed : int
             Seeds the validation split, initialisation, data order and dropout.
         timeseries : LoggedTraces or pandas.DataFrame, optional
-            Logged speed traces by ``trip_id``: the physics of those trips
-            (calibration, features, residuals) runs on the real trace. A
+            Logged speed traces by ``trip_id``: the physics of those trips (calibration,
+            features, residuals) runs on the real trace. A
             :class:`~hybridev.data.logs.MeasuredTrips` brings its own traces.
         groups : "auto", str, array_like (n_trips,) or None
             Groups of correlated trips (a column name such as ``"date"`` or
-            ``"session_group"``, or one label per trip): every split (early
-            stopping, split-conformal calibration, CV+ folds) keeps whole
-            groups together (:mod:`hybridev.learning.splits`). ``"auto"``
-            (default): the trips' ``date`` column, else ``session_group``,
-            else the calendar day of ``start_time``, else none, as the physics
-            calibration does; ``None``: every trip
-            its own group.
+            ``"session_group"``, or one label per trip): every split (early stopping,
+            split-conformal calibration, CV+ folds) keeps whole groups together
+            (:mod:`hybridev.learning.splits`). ``"auto"`` (default): the trips' ``date``
+            column, else ``session_group``, else the calendar day of ``start_time``,
+            else none, as the physics calibration does; ``None``: every trip its own
+            group.
         progress : callable, optional
             Called with the number of finished epochs.
 
@@ -218,9 +219,9 @@ class HybridModel(RefitGuardMixin, HybridParams):
         t0 = time.perf_counter()
         good, traces, table = fitting.fit_inputs(self, measured_trips, timeseries)
         split = fitting.split_trips(self, good, table, groups, seed)
-        for attr in ("physics_", "learner_", "domain_", "calibrator_"):
+        for attr in ("physics_", "learner_", "domain_", "calibrator_", "gate_"):
             self.__dict__.pop(attr, None)
-        # 1. physics: heater kind, posterior and discrepancy (calibration trips held out)
+        # 1. physics: heater kind, posterior, discrepancy (calibration trips held out)
         self.physics_, heater = fitting.fit_physics(self, good, split, traces, seed)
         # 2. residual learner and training domain on the physics of every trip
         self.learner_, self.domain_, (xs, ys, e_meas, e_phys, scale) = fitting.fit_learner(
@@ -230,11 +231,11 @@ class HybridModel(RefitGuardMixin, HybridParams):
         # 3. calibrator: split conformal on the held-out trips, or CV+ folds
         self.calibrator_ = fitting.fit_calibrator(self, good, traces, split, xs, ys, e_meas,
                                                   seed)
-        # 4. summary
         info = self.fit_info_ = fitting.fit_summary(self, good, split, heater, seed,
-                                                    (xs, e_meas, e_phys, scale))
+                                                    (xs, e_meas, e_phys, scale))  # 4. summary
         if traces is not None and self.domain_.needs_trace:
             info["trace_gap_rel"] = trace_gap(self, good, e_meas, traces)  # learning.ood
+        info.update(fit_notes.fit_notes(measured_trips, self.physics_.posterior_))
         info["fit_seconds"] = fitting.elapsed(t0)
         return self
 

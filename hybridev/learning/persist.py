@@ -10,7 +10,8 @@
                             weights, scalers, loss curves), ``physics.*`` (posterior
                             draws, discrepancy), ``domain.*``, ``calibrator.*`` (scores,
                             Mondrian bins, CV+ fold networks and physics); absent when
-                            nothing was fitted
+                            nothing was fitted (the stacking gate, ``gate``, has a
+                            document only; models without it load with weight 1)
     _hybridev-manifest.json  the marker of a folder written by hybridev
                             (:mod:`hybridev.core.outputs`): ``kind: "model_dir"``,
                             format name and version, and the SHA-256 of every file
@@ -301,7 +302,7 @@ def save_model(model, path: str | os.PathLike, *, option: str = "path") -> None:
     write_model_dir(path, doc, arrays or None, option=option)
 
 
-COMPONENTS = ("physics", "learner", "domain", "calibrator")
+COMPONENTS = ("physics", "learner", "domain", "calibrator", "gate")
 """Components of a saved model, in the order they are restored."""
 
 

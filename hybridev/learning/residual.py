@@ -6,8 +6,10 @@
 are the trip features (:mod:`hybridev.learning.features`) standardised the same way and
 held inside their training range (:meth:`hybridev.learning.domain.TrainingDomain.clip_features`).
 The learner itself is a deep ensemble (:func:`hybridev.learning.nn.train_ensemble`);
-another learner (a gate that shrinks the residual towards the physics, a simpler
-regressor) would be another class with :meth:`ResidualLearner.moments`.
+the stacking gate (:class:`hybridev.learning.gate.ResidualGate`, ``gate_``) scales the
+members' means in :meth:`ResidualLearner.moments`, so every prediction (point, CV+ fold,
+interval) uses the gated correction; a simpler regressor would be another class with
+:meth:`ResidualLearner.moments`.
 
 **Training-distance hold** (:func:`hold_inputs`). The networks take distance (and
 the physics energy, which scales with it) as inputs; outside the distances of the
@@ -198,8 +200,9 @@ class ResidualLearner:
 
         ``x`` standardised inputs (:meth:`features`); ``scale`` (n_trips,) the target
         scale; ``net`` another ensemble with this standardisation (a CV+ fold model).
-        The mean is each member's residual (``PureML``: energy), the variance its
-        predicted noise (kWh^2; None without variance heads).
+        The mean is each member's residual (``PureML``: energy), scaled by the gate's
+        weight when ``gate_`` is set; the variance its predicted noise (kWh^2; None
+        without variance heads).
         """
         net = self.net_ if net is None else net
         x = np.ascontiguousarray(x, dtype=np.float32)
@@ -217,6 +220,9 @@ class ResidualLearner:
         scale = np.asarray(scale, dtype=float)
         mean = (np.concatenate(means, axis=1).astype(float) * self.target_std_
                 + self.target_mean_) * scale
+        gate = getattr(self, "gate_", None)  # the stacking gate (hybridev.learning.gate)
+        if gate is not None and self.residual:
+            mean = gate.apply(mean)
         if variances[0] is None:
             return mean, None
         return mean, np.concatenate(variances, axis=1).astype(float) * (self.target_std_ * scale)**2

@@ -309,6 +309,8 @@ def test_cli_headline_says_unbounded_and_prints_the_fit_warnings(tmp_path, capsy
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "held-out (2 trips)" in out  # one whole day of two trips
+    # the data-quality block is printed before the fit
+    assert out.index("data: 6 trip row(s), 6 used, 0 rejected") < out.index("held-out")
     assert "coverage unbounded" in out
     assert "hybridev calibrate: CalibrationWarning" in err
     split = json.loads((tmp_path / "r" / "summary.json").read_text())["split"]
@@ -419,3 +421,37 @@ def test_no_plot_of_a_constant_and_posterior_panels(run):
     fig = F.posterior_prior_figure(post)
     titled = [ax for ax in fig.axes if ax.get_title()]
     assert [ax.get_title().split("\n")[0] for ax in titled] == list(post.param_names)
+
+
+def test_report_shows_data_quality_and_outliers(run):
+    s = run["summary"]
+    dq = s["data_quality"]
+    assert dq["totals"]["n_used"] == 60 and dq["totals"]["n_rejected"] == 4
+    assert dq["text"].startswith("data: 64 trip row(s), 60 used, 4 rejected")
+    assert s["outliers"]["n_outliers"] == len(s["outliers"]["trips"])
+    page = (run["out"] / "report.html").read_text()
+    assert "<h2>Data quality</h2>" in page and html.escape(dq["text"].splitlines()[0]) in page
+    assert f"Outlier trips ({s['outliers']['n_outliers']})" in page
+
+
+def test_report_lists_outlier_trips_with_their_reasons(run):
+    """A posterior that treats two training trips as outliers: both are listed, with why."""
+    from hybridev.apps.report.quality import data_notes, quality_section
+    from hybridev.bayes.outliers import OUTLIER_COLUMNS
+
+    class Post:
+        outliers_ = pd.DataFrame([
+            ["t001", 5.0, 2.0, 1.5, 9.0, 0.05, 1e-6, True, "measured energy far above"],
+            ["t002", 1.0, 2.0, -0.5, -7.0, 0.08, 1e-5, True, "measured energy far below"],
+            ["t003", 2.0, 2.0, 0.0, 0.1, 1.0, 0.9, False, ""]], columns=OUTLIER_COLUMNS)
+
+    notes = data_notes(run["measured"], Post())
+    assert notes["outliers"]["n_outliers"] == 2
+    assert [r["trip_id"] for r in notes["outliers"]["trips"]] == ["t001", "t002"]  # by |z|
+    assert "2 trip(s) treated as outliers" in notes["data_quality"]["text"]
+    section = quality_section({**run["summary"], **notes})
+    assert "Outlier trips (2)" in section
+    for trip, reason in (("t001", "far above"), ("t002", "far below")):
+        row = re.search(f"<tr>.*?{trip}.*?</tr>", section, re.S).group(0)
+        assert reason in row
+    assert "t003" not in section

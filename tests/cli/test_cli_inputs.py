@@ -69,7 +69,12 @@ def test_fit_derives_summaries_from_traces(logger, tmp_path, capsys):
                  "--columns", "e_net=energy_kwh", "--soc-initial", "0.8", "--out", str(out),
                  "--coastdown", "150", "0.3", "0.03", "1500", "--capacity-kwh", "50",
                  *FAST]) == 0
+    printed = capsys.readouterr().out  # the data-quality block, before the fit's lines
+    assert printed.index("traces: ") < printed.index("fitted on")
+    assert "derived: " in printed and "distance_km" in printed
     m = HybridModel.load(out)
+    assert m.fit_info_["data_quality"]["n_logged"] == m.fit_info_["n_trips"]
+    assert "outliers" not in m.fit_info_  # --no-calibrate-physics: no posterior
     assert m.capacity_kwh == 50.0 and m._vehicle().mass_kg == 1500.0
     pred = tmp_path / "p.parquet"
     assert main(["predict", str(out), str(logger / "bare.csv"), "--timeseries",

@@ -112,10 +112,15 @@ def test_ensemble_members_differ_and_prediction_is_their_mean(small):
                     conformal_fraction=0.0, max_epochs=4).fit(small, seed=0)
     out = m.predict(small)
     scale = m.learner_.target_scale(out.energy_kwh_physics, out.distance_km)
-    mean, var = m.learner_.moments(m.learner_.features(out, m.domain_), scale)
+    x = m.learner_.features(out, m.domain_)
+    mean, var = m.learner_.moments(x, scale)  # scaled by the stacking gate's weight
     assert mean.shape == var.shape == (3, len(small))
     assert np.all(var > 0)
-    assert not np.allclose(mean[0], mean[1]) and not np.allclose(mean[1], mean[2])
+    gate, m.learner_.gate_ = m.learner_.gate_, None
+    raw = m.learner_.moments(x, scale)[0]  # the members themselves
+    m.learner_.gate_ = gate
+    assert not np.allclose(raw[0], raw[1]) and not np.allclose(raw[1], raw[2])
+    np.testing.assert_allclose(mean, gate.weight_ * raw, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(out.energy_kwh_pred,
                                out.energy_kwh_physics + mean.mean(axis=0), rtol=1e-12)
     assert m.n_parameters_ == 3393 + 17

@@ -100,7 +100,8 @@ def test_predict_distribution_is_the_raw_distribution_rescaled(model):
 
 def test_components_hold_the_learned_state(model):
     parts = model.components()
-    assert list(parts) == ["physics", "learner", "domain", "calibrator"]
+    assert list(parts) == ["physics", "learner", "domain", "calibrator", "gate"]
+    assert model.gate_ is model.learner_.gate_ and 0.0 <= model.gate_.weight_ <= 1.0
     assert model.net_ is model.learner_.net_ and model.conformal_ is model.calibrator_.conformal_
     assert model.posterior_ is model.physics_.posterior_
     assert model.feature_names_ == model.learner_.feature_names

@@ -58,6 +58,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.apps.report.html import write_report
+from hybridev.apps.report.quality import data_notes
 from hybridev.apps.report.scoring import FLAG_FRACTION, REPORT_LEVELS, score_holdout
 from hybridev.bayes.groups import auto_group_column, group_labels
 from hybridev.bayes.priors import DEFAULT_PARAMS
@@ -442,6 +443,7 @@ def calibration_report(measured: MeasuredTrips | pd.DataFrame, *, out_dir: str |
             model_params=model_params, calibrate_kwargs=calibrate_kwargs,
             group_column=group_column, stage=stage)
         summary = score_holdout(result, measured.rejected)
+        summary.update(data_notes(measured, result.posterior))  # data quality, outliers
         summary["data"]["source"] = source
         summary["config"]["test_fraction"] = float(test_fraction)
         summary["config"]["vehicle"] = dataclasses.asdict(vehicle or VehicleParams())

@@ -9,6 +9,7 @@ from pathlib import Path
 from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
+    print_data_quality,
     read_trips,
     report_rejected,
     vehicle_from_args,
@@ -57,7 +58,6 @@ def run(args: argparse.Namespace) -> int:
     from hybridev.apps.report.html import legacy_report
     from hybridev.core.checks import check_seed
     from hybridev.core.outputs import check_output
-    from hybridev.data.logs import MeasuredTrips
     from hybridev.learning.persist import check_model_path
 
     check_seed(args.seed, "--seed")
@@ -75,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
     if args.save_model is not None:
         check_model_path(args.save_model, option="--save-model", inputs=[*inputs, args.out])
     vehicle = vehicle_from_args(args)
-    trips, traces, rejected = read_trips(args.measured, args, measured=True, vehicle=vehicle)
-    measured = MeasuredTrips(trips, traces, rejected)
+    measured = read_trips(args.measured, args, measured=True, vehicle=vehicle, whole=True)
+    print_data_quality(measured)  # what was derived, smoothed, flagged or rejected
+    rejected = measured.rejected
     if measured.n_rejected:
         report_rejected(NAME, args.measured, rejected, limit=5)
         print("(every rejected row is listed in the report)", file=sys.stderr)

@@ -14,6 +14,7 @@ from hybridev.cli.inputs import (
     add_input_arguments,
     add_vehicle_arguments,
     hint_missing_soc,
+    print_data_quality,
     read_trips,
     report_rejected,
     vehicle_from_args,
@@ -74,8 +75,8 @@ def run(args: argparse.Namespace) -> int:
                              getattr(args, "columns_file", None)])
     vehicle = vehicle_from_args(args)
     if args.skip_bad_rows or args.timeseries is not None:
-        table, traces, rejected = read_trips(args.measured, args, measured=True,
-                                             vehicle=vehicle)
+        data = read_trips(args.measured, args, measured=True, vehicle=vehicle, whole=True)
+        rejected = data.rejected
         report_rejected(NAME, args.measured, rejected)
         if len(rejected) and not args.skip_bad_rows:
             raise ValueError(f"{len(rejected)} row(s)/trace(s) of {args.measured} were rejected "
@@ -84,11 +85,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         from hybridev.data.measured import validate_measured_trips
 
-        table, traces, _ = read_trips(args.measured, args, measured=False, strict=True)
+        table, _, _ = read_trips(args.measured, args, measured=False, strict=True)
         try:
             table, _ = validate_measured_trips(table, vehicle, on_error="raise")
         except ValueError as exc:
             raise hint_missing_soc(exc) from exc
+        data = table
+    print_data_quality(data)  # what was derived, smoothed, flagged or rejected
     from hybridev.learning.model import PAPER_CONFIG
 
     config = dict(PAPER_CONFIG) if args.paper else {}
@@ -99,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
             config[name] = value
     model = HybridModel(vehicle, **config, max_epochs=args.max_epochs, n_steps=args.n_steps)
     with progress_bar(total=args.max_epochs, unit="epoch", desc="fit", quiet=args.quiet) as bar:
-        model.fit(table, seed=args.seed, progress=bar.update_to, timeseries=traces)
+        model.fit(data, seed=args.seed, progress=bar.update_to)  # MeasuredTrips: + traces
     model.save(args.out)
     info = model.fit_info_
     if info.get("conformal") == "cv+":  # every trip calibrates, out of fold
