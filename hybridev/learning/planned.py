@@ -14,7 +14,16 @@ its own scores, learned at fit on the training trips themselves:
 * **split fits**: the held-out calibration trips are predicted without their
   traces by the final model.
 
-The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the
+A synthesised trace is smoother than how a given car is driven (idling,
+stop-and-go at low mean speed), so summary-only predictions are biased in a way
+that depends on the conditions. The calibrator learns a multiplicative
+correction ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` mean speed in km/h, ``T``
+in °C) by ridge regression of the out-of-fold log ratios ``ln(E / mu)``; it
+scales the whole summary-only distribution (mean and spread). The scores are
+*cross-fitted*: a trip's score uses the correction fitted on the other folds'
+trips only, so that the calibration stays out of sample.
+
+The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
 summary-only predictive mean and standard deviation of the scoring model) make
 a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
 conformal interval ``mu +- q s`` with the final model's summary-only ``mu``
@@ -46,8 +55,9 @@ from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, domain_quantities
 from hybridev.learning.shift import MAX_INFLATION, GapRate, fold_gaps
 
-__all__ = ["PlannedTripCalibrator", "fit_planned", "gap_inflation", "interval_bounds",
-           "planned_arrays", "planned_rows", "set_planned_state", "spread_factors"]
+__all__ = ["PlannedTripCalibrator", "conditions_of", "fit_planned", "gap_inflation",
+           "interval_bounds", "planned_arrays", "planned_distribution", "planned_rows",
+           "planned_scale", "set_planned_state", "spread_factors"]
 
 
 @dataclasses.dataclass
@@ -77,8 +87,9 @@ class PlannedTripCalibrator:
 
     MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
 
-    def fit(self, y, mean, std, gap=None) -> PlannedTripCalibrator:
-        """Scores from measured energies and summary-only predictions.
+    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None
+            ) -> PlannedTripCalibrator:
+        """Scores (and the mean correction) from measured energies and summary-only predictions.
 
         Parameters
         ----------
@@ -87,9 +98,28 @@ class PlannedTripCalibrator:
             standard deviations (> 0).
         gap : array_like, shape (n,), optional
             Intensive gap of each trip to its fold's domain (default 0).
+        conditions : array_like, shape (n, 2), optional
+            Mean speed (km/h) and temperature (°C) of each trip: with them, the
+            mean correction is learned (else none, ``coef_`` zeros).
+        fold : array_like of int, shape (n,), optional
+            Folds of the cross-fitting of the correction (default: 5 blocks of
+            consecutive trips).
         """
-        cp = NormalizedConformal.fit(np.asarray(y, float), np.asarray(mean, float),
-                                     np.asarray(std, float))
+        y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+        self.coef_ = np.zeros(len(_CORRECTION_TERMS))
+        if conditions is not None:
+            c = np.asarray(conditions, float)
+            lr = np.log(np.maximum(y, 1e-9) / np.maximum(mean, 1e-9))
+            fold = (np.arange(len(y)) * 5 // max(len(y), 1) if fold is None
+                    else np.asarray(fold, int))
+            factor = np.ones(len(y))
+            for f in np.unique(fold):  # cross-fitted: each trip corrected out of fold
+                rest = fold != f
+                if rest.sum() >= 2 * len(_CORRECTION_TERMS):
+                    factor[~rest] = np.exp(_design(c[~rest]) @ _ridge(c[rest], lr[rest]))
+            mean, std = mean * factor, std * factor
+            self.coef_ = _ridge(c, lr)
+        cp = NormalizedConformal.fit(y, mean, std)
         g = np.zeros(cp.n_calibration) if gap is None else np.asarray(gap, float)
         if g.shape != cp.residuals.shape:
             raise ValueError(f"gap must have one value per trip ({cp.n_calibration}); "
@@ -102,6 +132,10 @@ class PlannedTripCalibrator:
         inside = self.gap_ <= 1.0
         r = self.residuals_[inside] if inside.sum() >= self.MIN_INSIDE else self.residuals_
         self.conformal_ = NormalizedConformal(r)
+
+    def correction(self, conditions) -> np.ndarray:
+        """Multiplicative mean correction per trip, shape (n,), from (n, 2) conditions."""
+        return np.exp(_design(np.asarray(conditions, float)) @ self.coef_)
 
     @property
     def n_calibration(self) -> int:
@@ -126,7 +160,7 @@ class PlannedTripCalibrator:
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """State for the saved model."""
-        return {"residuals": self.residuals_, "gap": self.gap_}
+        return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_}
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
@@ -138,10 +172,43 @@ class PlannedTripCalibrator:
         if r.shape != g.shape or r.ndim != 1 or not np.all(np.isfinite(g)):
             raise ValueError("planned-trip calibration: residuals and gap must be 1-D arrays "
                              f"of equal length; got {r.shape}, {g.shape}")
+        coef = np.asarray(a.get("coef", np.zeros(len(_CORRECTION_TERMS))), float)
+        if coef.shape != (len(_CORRECTION_TERMS),) or not np.all(np.isfinite(coef)):
+            raise ValueError(f"planned-trip calibration: coef must be "
+                             f"{len(_CORRECTION_TERMS)} finite values; got {coef!r}")
         out = cls()
-        out.residuals_, out.gap_ = r, g
+        out.residuals_, out.gap_, out.coef_ = r, g, coef
         out._build()
         return out
+
+
+_CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
+_RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
+
+
+def _design(conditions: np.ndarray) -> np.ndarray:
+    """Columns of :data:`_CORRECTION_TERMS` from (n, 2) speed (km/h), temperature (°C)."""
+    c = np.atleast_2d(conditions)
+    return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)),
+                            c[:, 1] / 10.0])
+
+
+def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Ridge coefficients of ``target`` on :func:`_design`, slopes shrunk by :data:`_RIDGE`."""
+    x = _design(conditions)
+    mu, sd = x[:, 1:].mean(axis=0), x[:, 1:].std(axis=0)
+    sd = np.where(sd > 1e-9, sd, 1.0)
+    z = (x[:, 1:] - mu) / sd
+    t0 = float(np.mean(target))
+    b = np.linalg.solve(z.T @ z + _RIDGE * np.eye(z.shape[1]), z.T @ (target - t0))
+    slopes = b / sd
+    return np.r_[t0 - mu @ slopes, slopes]
+
+
+def conditions_of(table: pd.DataFrame) -> np.ndarray:
+    """(n, 2) mean speed (km/h) and temperature (°C) of a trip table."""
+    return np.column_stack([table["avg_speed_kmh"].to_numpy(float),
+                            table["temperature_c"].to_numpy(float)])
 
 
 # -- hooks of HybridModel ---------------------------------------------------------------
@@ -180,8 +247,9 @@ def fit_planned(model, good: pd.DataFrame, traces, cal_idx: np.ndarray, e_meas: 
                 _, dist = model._distribution(good.iloc[idx], seed=int(seed), traces=None)
                 mu, sd = dist.mean(), dist.std()
         g_plan = fold_gaps(good, fold, traces, score_traces=None)[idx]
-        model.planned_ = PlannedTripCalibrator().fit(e_meas[idx], mu, np.maximum(sd, 1e-12),
-                                                     g_plan)
+        model.planned_ = PlannedTripCalibrator().fit(
+            e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
+            conditions=conditions_of(good.iloc[idx]), fold=fold[idx] if cv else None)
         model.domain_ = dataclasses.replace(model.domain_, needs_trace=False)
         scores.append(model.planned_.residuals_)
         gaps.append(g_plan)
@@ -193,6 +261,27 @@ def planned_rows(model, table: pd.DataFrame, traces) -> np.ndarray:
     if getattr(model, "planned_", None) is None:
         return np.zeros(len(table), dtype=bool)
     return ~domain_quantities(table, traces)[1]
+
+
+def planned_scale(model, table: pd.DataFrame, traces) -> np.ndarray | None:
+    """Per-trip factor (n_trips,) on the summary-only distribution: the mean correction
+    on planned rows, 1 elsewhere; None when no row is planned."""
+    plan = planned_rows(model, table, traces)
+    if not plan.any():
+        return None
+    f = np.ones(len(table))
+    f[plan] = model.planned_.correction(conditions_of(table.iloc[np.flatnonzero(plan)]))
+    return f
+
+
+def planned_distribution(model, table: pd.DataFrame, traces, dist):
+    """``dist`` (EnergyDistribution) with planned rows scaled by the mean correction."""
+    f = planned_scale(model, table, traces)
+    if f is None:
+        return dist
+    return dataclasses.replace(dist, physics_draws_kwh=dist.physics_draws_kwh * f,
+                               residual_mean_kwh=dist.residual_mean_kwh * f,
+                               residual_std_kwh=dist.residual_std_kwh * f, _cache={})
 
 
 def gap_inflation(model, gap) -> np.ndarray:

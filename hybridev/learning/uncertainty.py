@@ -95,6 +95,7 @@ from hybridev.learning.physical import energy_floor_kwh, held_feature_table
 from hybridev.learning.planned import (
     interval_bounds,
     planned_arrays,
+    planned_distribution,
     set_planned_state,
     spread_factors,
 )
@@ -303,7 +304,8 @@ class ProbabilisticMixin(OutOfDomainMixin):
             std = np.zeros_like(mean) if var is None else np.sqrt(var)
             tables.append(table)
             dists.append(EnergyDistribution(centred, mean, std))
-        return tables[0], dists
+        # planned trips (no trace): the learned mean correction (learning.planned)
+        return tables[0], [planned_distribution(self, tables[0], traces, d) for d in dists]
 
     def _conformal_factor(self, level: float) -> float | None:
         """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""

@@ -87,6 +87,32 @@ def test_planned_coverage_on_a_synthetic_truth(fitted):
     assert m.planned_.quantile(0.9) != pytest.approx(m.conformal_.quantile(0.9))
 
 
+def test_planned_mean_correction_is_learned_and_used_everywhere(fitted):
+    """The synthetic truth's stop-and-go traces use more energy than the model's
+    synthesised ones: the learned correction reduces the planned trips' error, and
+    predict, predict_interval and predict_distribution share the corrected mean."""
+    m, _, _, test, test_ts = fitted
+    y = test["energy_kwh"].to_numpy()
+    x = test.drop(columns=["energy_kwh"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        p = m.predict(x)["energy_kwh_pred"].to_numpy()
+        iv = m.predict_interval(x, 0.9)["energy_kwh_pred"].to_numpy()
+        dm = m.predict_distribution(x).mean()
+        coef = m.planned_.coef_.copy()
+        try:
+            m.planned_.coef_ = np.zeros_like(coef)
+            raw = m.predict(x)["energy_kwh_pred"].to_numpy()
+        finally:
+            m.planned_.coef_ = coef
+        traced = m.predict(x, timeseries=test_ts)["energy_kwh_pred"].to_numpy()
+    np.testing.assert_allclose(iv, p, rtol=1e-6)
+    np.testing.assert_allclose(dm, p, rtol=1e-6)
+    assert np.mean(np.abs(p / y - 1)) < np.mean(np.abs(raw / y - 1))
+    assert abs(np.mean(p / y - 1)) < abs(np.mean(raw / y - 1))
+    assert not np.allclose(traced, p)  # with the trace: no correction
+
+
 def test_predict_distribution_uses_the_planned_factor(fitted):
     m, _, _, test, test_ts = fitted
     x = test.drop(columns=["energy_kwh"]).head(20)
