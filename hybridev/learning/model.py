@@ -83,6 +83,7 @@ from hybridev.learning.nn import train_ensemble
 from hybridev.learning.ood import trace_gap
 from hybridev.learning.persist import load_model, save_model
 from hybridev.learning.physical import _floor_of_columns, _held_columns
+from hybridev.learning.planned import fit_planned, planned_scale
 from hybridev.learning.predictive import soc_from_energy
 from hybridev.learning.refit import RefitGuardMixin
 from hybridev.learning.splits import group_codes, group_holdout
@@ -680,6 +681,7 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             info["val_mae_kwh_physics"] = float(np.mean(np.abs(e_meas[val_idx] - e_phys[val_idx])))
             info["val_mae_kwh_model"] = float(np.mean(np.abs(e_meas[val_idx] - pred)))
         self.fit_info_ = info
+        fit_planned(self, good, traces, cal_idx, e_meas, seed)  # planned trips (learning.planned)
         if traces is not None and self.domain_.needs_trace:
             info["trace_gap_rel"] = trace_gap(self, good, e_meas, traces)  # learning.ood
         info["fit_seconds"] = round(time.perf_counter() - t0, 3)
@@ -759,6 +761,8 @@ class HybridModel(ProbabilisticMixin, RefitGuardMixin, BaseEstimator):
             scale = self._target_scale(e_phys, arr["distance_km"]) * factor
             x = self._standardized(_feature_matrix(held, n, self.feature_names_))
             energy = self._combine(e_phys, self._residual_moments(x, scale)[0].mean(0))
+            if (f := planned_scale(self, table, traces)) is not None:  # learning.planned
+                energy = energy * f  # planned trips (no trace): the learned mean correction
             energy = np.maximum(energy, _floor_of_columns(arr, self._vehicle()))
         else:
             warnings.warn(f"{type(self).__name__} is not fitted: energy_kwh_pred is the physics "

@@ -48,11 +48,11 @@ import pandas as pd
 
 from hybridev.learning.domain import (
     MISSING_INPUT_SCORE,
-    TrainingDomain,
     domain_quantities,
     warn_out_of_domain,
 )
 from hybridev.learning.features import MODE_NAMES
+from hybridev.learning.planned import gap_inflation
 from hybridev.learning.predictive import EnergyDistribution
 
 __all__ = ["OutOfDomainMixin", "trace_gap"]
@@ -103,7 +103,7 @@ class OutOfDomainMixin:
         score, ok = dom.score(table, traces)
         if ok.all():
             return score, ok, sd
-        gap = dom.gaps(table, traces).max(axis=1)
+        gap = dom.gap(table, traces)  # intensive conditions only (learning.domain)
         no_trace = dom.needs_trace & ~domain_quantities(table, traces)[1]
         gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
         post = getattr(self, "posterior_", None)
@@ -113,7 +113,7 @@ class OutOfDomainMixin:
         var_rest = (dist.excess_var() if dist is not None
                     else np.maximum(sd**2 - var_draws, 0.0))
         rest = (noise * e_p) ** 2 + (mu - e_p) ** 2 + var_rest
-        infl = TrainingDomain.inflation(gap)
+        infl = gap_inflation(self, gap)  # learned rate (learning.planned / learning.shift)
         sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
         gap_rel = float((getattr(self, "fit_info_", None) or {}).get("trace_gap_rel", 0.0))
         if gap_rel > 0 and no_trace.any():  # what the missing trace alone can change

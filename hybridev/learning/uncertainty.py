@@ -92,6 +92,13 @@ from hybridev.learning.inputs import unpack_trips
 from hybridev.learning.mondrian import mondrian_bins, mondrian_interval
 from hybridev.learning.ood import OutOfDomainMixin
 from hybridev.learning.physical import energy_floor_kwh, held_feature_table
+from hybridev.learning.planned import (
+    interval_bounds,
+    planned_arrays,
+    planned_distribution,
+    set_planned_state,
+    spread_factors,
+)
 from hybridev.learning.predictive import EnergyDistribution, soc_from_energy
 from hybridev.physics.stats import energy_from_stats
 from hybridev.physics.trips import with_physics_columns
@@ -187,7 +194,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
         dom = getattr(self, "domain_", None)
         if dom is None or getattr(self, "discrepancy_", None) is None or not len(trips):
             return None
-        gap = dom.gaps(trips, traces).max(axis=1)
+        gap = dom.gap(trips, traces)  # intensive conditions only (learning.domain)
         return None if np.all(gap <= 1.0) else dom.discrepancy_fade(gap)
 
     def _fit_discrepancy(self, post: PhysicsPosterior, measured: pd.DataFrame,
@@ -297,7 +304,8 @@ class ProbabilisticMixin(OutOfDomainMixin):
             std = np.zeros_like(mean) if var is None else np.sqrt(var)
             tables.append(table)
             dists.append(EnergyDistribution(centred, mean, std))
-        return tables[0], dists
+        # planned trips (no trace): the learned mean correction (learning.planned)
+        return tables[0], [planned_distribution(self, tables[0], traces, d) for d in dists]
 
     def _conformal_factor(self, level: float) -> float | None:
         """Conformal quantile for ``level``, None without a conformal step; checks ``level``."""
@@ -366,6 +374,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
         table, dist = self._distribution(trips, seed=seed, traces=traces)
         factor = 1.0 if q is None else max(self.conformal_.spread_factor(level), 1e-6)
         _, ok, sd_ood = self._ood_spread(table, dist, traces)
+        factor = spread_factors(self, table, traces, factor, level)  # learning.planned
         sd = np.maximum(dist.std(), 1e-12)
         per_trip = np.where(ok, factor, np.maximum(factor, sd_ood / sd))
         if np.all(per_trip == factor):
@@ -473,6 +482,8 @@ class ProbabilisticMixin(OutOfDomainMixin):
             lo = np.where(ok, lo, mu - q * sd)
             hi = np.where(ok, hi, mu + q * sd)
             lo_one = np.where(ok, lo_one, self.conformal_.lower_bound(mu, sd, level))
+        # planned trips (no trace) and the learned out-of-domain widening (learning.planned)
+        lo, hi, lo_one = interval_bounds(self, table, traces, mu, sd, level, lo, hi, lo_one)
         # out of the domain: mu +- z sd_ood (learning.ood), never narrower than that
         lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
         hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))
@@ -533,6 +544,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
         dom = getattr(self, "domain_", None)
         if dom is not None:
             arrays.update({f"domain.{k}": v for k, v in dom.to_arrays().items()})
+        arrays.update(planned_arrays(self))  # planned trips, gap rate (learning.planned)
         return doc, arrays
 
     def _set_extra_state(self, doc: dict, arrays: dict[str, np.ndarray]) -> None:
@@ -561,3 +573,4 @@ class ProbabilisticMixin(OutOfDomainMixin):
         if any(k.startswith("domain.") for k in arrays):
             self.domain_ = TrainingDomain.from_arrays(
                 {k[len("domain."):]: v for k, v in arrays.items() if k.startswith("domain.")})
+        set_planned_state(self, arrays)  # planned trips, gap rate (learning.planned)
