@@ -21,7 +21,9 @@ correction ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` mean speed in km/h, ``T``
 in °C) by ridge regression of the out-of-fold log ratios ``ln(E / mu)``; it
 scales the whole summary-only distribution (mean and spread). The scores are
 *cross-fitted*: a trip's score uses the correction fitted on the other folds'
-trips only, so that the calibration stays out of sample.
+trips only, so that the calibration stays out of sample; and the correction is
+kept only when, so cross-fitted, it lowers the mean absolute log error of the
+scored trips (else ``coef_`` is zero: no correction).
 
 The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
 summary-only predictive mean and standard deviation of the scoring model) make
@@ -117,8 +119,11 @@ class PlannedTripCalibrator:
                 rest = fold != f
                 if rest.sum() >= 2 * len(_CORRECTION_TERMS):
                     factor[~rest] = np.exp(_design(c[~rest]) @ _ridge(c[rest], lr[rest]))
-            mean, std = mean * factor, std * factor
-            self.coef_ = _ridge(c, lr)
+            # kept only when it helps out of fold (on M1 the networks leave no bias to
+            # correct, and a day-level offset corrected from the other days adds error)
+            if np.mean(np.abs(lr - np.log(factor))) < np.mean(np.abs(lr)):
+                mean, std = mean * factor, std * factor
+                self.coef_ = _ridge(c, lr)
         cp = NormalizedConformal.fit(y, mean, std)
         g = np.zeros(cp.n_calibration) if gap is None else np.asarray(gap, float)
         if g.shape != cp.residuals.shape:
