@@ -359,7 +359,7 @@ def spread_factors(model, table: pd.DataFrame, traces, factor, level: float):
         f[plan] = max(fp, 1e-6)
     if rate_ is not None:
         f = f * rate_.inflation(model.domain_.gap(table, traces))
-    return f
+    return float(f[0]) if len(f) and np.all(f == f[0]) else f  # one factor: a number
 
 
 def planned_arrays(model) -> dict[str, np.ndarray]:
