@@ -107,7 +107,7 @@ def _baselines(m, extra, tr, te, vehicle, heater_kind) -> dict:
            "median_kwh_per_km": np.median(y[tr] / d[tr]) * d[te]}
     kind = heater_kind or ("ptc" if vehicle.heater_kind == "auto" else vehicle.heater_kind)
     veh = dataclasses.replace(vehicle, heater_kind=kind)  # the terms of the learned heater
-    f = trip_stats(trips, veh).features()  # summary only: synthesised traces
+    f = trip_stats(trips, veh, missing_mode="normal").features()  # summary: synthesised
     keep = np.abs(f).sum(axis=1) > 0
     w, _ = nnls(f[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
     out["nnls_physics_terms"] = f[keep][:, te].T @ w
