@@ -34,6 +34,7 @@ training days). Writes ``RESULTS.md`` and ``planned_trips.json`` to ``--out``
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -94,7 +95,7 @@ def _summarise(rows: list[dict], key: str) -> dict:
             "flagged": int(sum(int(np.sum(r[key]["flagged"])) for r in rows))}
 
 
-def _baselines(m, extra, tr, te, vehicle) -> dict:
+def _baselines(m, extra, tr, te, vehicle, heater_kind) -> dict:
     from scipy.optimize import nnls
     from sklearn.linear_model import LinearRegression
 
@@ -104,7 +105,9 @@ def _baselines(m, extra, tr, te, vehicle) -> dict:
     xs = _summary_x(trips, extra)
     out = {"linreg_summary": LinearRegression().fit(xs[tr], y[tr]).predict(xs[te]),
            "median_kwh_per_km": np.median(y[tr] / d[tr]) * d[te]}
-    f = trip_stats(trips, vehicle).features()  # summary only: synthesised traces
+    kind = heater_kind or ("ptc" if vehicle.heater_kind == "auto" else vehicle.heater_kind)
+    veh = dataclasses.replace(vehicle, heater_kind=kind)  # the terms of the learned heater
+    f = trip_stats(trips, veh, missing_mode="normal").features()  # summary: synthesised
     keep = np.abs(f).sum(axis=1) > 0
     w, _ = nnls(f[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
     out["nnls_physics_terms"] = f[keep][:, te].T @ w
@@ -127,8 +130,13 @@ def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
             "traced_q90": float(model.conformal_.quantile(LEVEL)),
             "gap_rate": rate.rate_, "gap_rate_learned": rate.learned_,
             "n_shifted": rate.n_shifted_,
+            "planned_corrected": bool(np.any(model.planned_.coef_ != 0)),
+            "planned_mape_pct": float(100 * np.mean(np.abs(
+                planned["energy_kwh_pred"].to_numpy(float) / y - 1))),
+            "traced_mape_pct": float(100 * np.mean(np.abs(
+                traced["energy_kwh_pred"].to_numpy(float) / y - 1))),
             "planned": _interval_scores(y, planned), "traced": _interval_scores(y, traced),
-            "baselines": _baselines(m, extra, np.sort(tr), te, vehicle)}
+            "baselines": _baselines(m, extra, np.sort(tr), te, vehicle, model.heater_kind_)}
 
 
 def run(root: Path) -> dict:
@@ -197,12 +205,14 @@ def main(argv=None) -> int:
         for b in ("linreg_summary", "median_kwh_per_km", "nnls_physics_terms"):
             lines.append(f"| {b} | {s[b]['mape_pct']:.2f} | {s[b]['bias_pct']:+.2f} |")
         lines += ["", "| fold | train | test | planned q90 | traced q90 | gap rate | "
-                  "learned | shifted OOF trips |", "|---|---|---|---|---|---|---|---|"]
+                  "learned | shifted OOF trips | planned mean corrected | planned MAPE % | "
+                  "traced MAPE % |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for f in s["folds"]:
             lines.append(f"| {f['fold']} | {f['n_train']} | {f['n_test']} | "
                          f"{f['planned_q90']:.2f} | {f['traced_q90']:.2f} | "
                          f"{f['gap_rate']:.2f} | {f['gap_rate_learned']} | "
-                         f"{f['n_shifted']} |")
+                         f"{f['n_shifted']} | {f['planned_corrected']} | "
+                         f"{f['planned_mape_pct']:.2f} | {f['traced_mape_pct']:.2f} |")
         lines.append("")
     return write_markdown(out, "RESULTS", lines, res["runtime_s"])
 

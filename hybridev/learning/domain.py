@@ -208,7 +208,7 @@ class TrainingDomain:
         ...     "avg_speed_kmh": [50.0, 60.0], "temperature_c": [20.0, 22.0]}), np.zeros((2, 1)))
         >>> d.gap(pd.DataFrame({"distance_km": [400.0, 15.0], "avg_speed_kmh": [55.0, 55.0],
         ...     "temperature_c": [21.0, 14.0]})).round(2).tolist()
-        [0.33, 6.0]
+        [0.62, 6.0]
         """
         return _intensive_max(self.gaps(table, traces))
 

@@ -21,7 +21,11 @@ correction ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` mean speed in km/h, ``T``
 in °C) by ridge regression of the out-of-fold log ratios ``ln(E / mu)``; it
 scales the whole summary-only distribution (mean and spread). The scores are
 *cross-fitted*: a trip's score uses the correction fitted on the other folds'
-trips only, so that the calibration stays out of sample.
+trips only, so that the calibration stays out of sample; and the correction is
+kept only when, so cross-fitted, it lowers the mean absolute log error of the
+scored trips by at least 10 % (else ``coef_`` is zero: no correction); the
+speed and temperature are held inside those of the scored trips (no
+extrapolation of the correction).
 
 The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
 summary-only predictive mean and standard deviation of the scoring model) make
@@ -107,6 +111,7 @@ class PlannedTripCalibrator:
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
         self.coef_ = np.zeros(len(_CORRECTION_TERMS))
+        self.conditions_range_ = np.array([[0.0, -273.15], [np.inf, np.inf]])
         if conditions is not None:
             c = np.asarray(conditions, float)
             lr = np.log(np.maximum(y, 1e-9) / np.maximum(mean, 1e-9))
@@ -116,9 +121,14 @@ class PlannedTripCalibrator:
             for f in np.unique(fold):  # cross-fitted: each trip corrected out of fold
                 rest = fold != f
                 if rest.sum() >= 2 * len(_CORRECTION_TERMS):
-                    factor[~rest] = np.exp(_design(c[~rest]) @ _ridge(c[rest], lr[rest]))
-            mean, std = mean * factor, std * factor
-            self.coef_ = _ridge(c, lr)
+                    held = np.clip(c[~rest], c[rest].min(axis=0), c[rest].max(axis=0))
+                    factor[~rest] = np.exp(_design(held) @ _ridge(c[rest], lr[rest]))
+            # kept only when it clearly helps out of fold (on M1 the networks leave no
+            # bias to correct, and an offset corrected from the other days adds error)
+            if np.mean(np.abs(lr - np.log(factor))) < _MIN_GAIN * np.mean(np.abs(lr)):
+                mean, std = mean * factor, std * factor
+                self.coef_ = _ridge(c, lr)
+                self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
         cp = NormalizedConformal.fit(y, mean, std)
         g = np.zeros(cp.n_calibration) if gap is None else np.asarray(gap, float)
         if g.shape != cp.residuals.shape:
@@ -134,8 +144,14 @@ class PlannedTripCalibrator:
         self.conformal_ = NormalizedConformal(r)
 
     def correction(self, conditions) -> np.ndarray:
-        """Multiplicative mean correction per trip, shape (n,), from (n, 2) conditions."""
-        return np.exp(_design(np.asarray(conditions, float)) @ self.coef_)
+        """Multiplicative mean correction per trip, shape (n,), from (n, 2) conditions.
+
+        The conditions are held inside those of the scored trips
+        (``conditions_range_``): the correction does not extrapolate.
+        """
+        lo, hi = self.conditions_range_
+        held = np.clip(np.atleast_2d(np.asarray(conditions, float)), lo, hi)
+        return np.exp(_design(held) @ self.coef_)
 
     @property
     def n_calibration(self) -> int:
@@ -160,7 +176,8 @@ class PlannedTripCalibrator:
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """State for the saved model."""
-        return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_}
+        return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
+                "conditions_range": self.conditions_range_}
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
@@ -176,14 +193,19 @@ class PlannedTripCalibrator:
         if coef.shape != (len(_CORRECTION_TERMS),) or not np.all(np.isfinite(coef)):
             raise ValueError(f"planned-trip calibration: coef must be "
                              f"{len(_CORRECTION_TERMS)} finite values; got {coef!r}")
+        rng_ = np.asarray(a.get("conditions_range", [[0.0, -273.15], [np.inf, np.inf]]), float)
+        if rng_.shape != (2, 2):
+            raise ValueError(f"planned-trip calibration: conditions_range must be (2, 2); "
+                             f"got {rng_.shape}")
         out = cls()
-        out.residuals_, out.gap_, out.coef_ = r, g, coef
+        out.residuals_, out.gap_, out.coef_, out.conditions_range_ = r, g, coef, rng_
         out._build()
         return out
 
 
 _CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
 _RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
+_MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
 
 
 def _design(conditions: np.ndarray) -> np.ndarray:
@@ -354,7 +376,7 @@ def spread_factors(model, table: pd.DataFrame, traces, factor, level: float):
         f[plan] = max(fp, 1e-6)
     if rate_ is not None:
         f = f * rate_.inflation(model.domain_.gap(table, traces))
-    return f
+    return float(f[0]) if len(f) and np.all(f == f[0]) else f  # one factor: a number
 
 
 def planned_arrays(model) -> dict[str, np.ndarray]:

@@ -15,13 +15,19 @@ re-recorded from each fold's training trips): they are natural shift
 experiments. Each such trip's normalised score ``a_i = |y - mu| / s``,
 over the in-domain conformal quantile ``q`` at the fit level (0.9), says
 how much wider its interval needed to be; ``k_i = (a_i / q - 1) / (g_i - 1)``
-is the rate that would just have covered it. The learned rate is the
-conformal quantile of the ``k_i`` at the same level (so that about 90 % of
-the shifted trips would have been covered), floored at :data:`GAP_RATE_FLOOR`
-(a width that does not grow at all away from the data is not credible however
-few trips say so). With fewer than :data:`MIN_SHIFTED_TRIPS` shifted trips the
-quantile is not defined: the rate is then the largest ``k_i`` or the fixed
-0.25, whichever is larger (conservative).
+is the rate that would just have covered it. The learned rate is the linear
+quantile regression (at the same level) of ``a_i / q - 1`` on ``g_i - 1``
+through the origin: the smallest rate that covers about 90 % of the shifted
+trips, each weighted by its gap ``g_i - 1`` (the minimiser of the pinball loss
+is the weighted quantile of the ``k_i``). The weights make it robust: a trip
+just outside its fold's domain with an ordinary large score (one in ten has
+one inside the domain too) has a huge ``k_i`` but almost no weight. It is
+floored at :data:`GAP_RATE_FLOOR` (a width that does not grow at all away from
+the data is not credible however few trips say so) and capped at
+:data:`GAP_RATE_CAP`. With fewer than :data:`MIN_SHIFTED_TRIPS` shifted trips
+the rate is the larger of that estimate and the fixed 0.25 (conservative).
+The in-domain quantile ``q`` needs at least 9 in-domain trips; with fewer, all
+the trips' scores give it.
 
 Why not weighted conformal prediction (Tibshirani et al. 2019)? It re-weights
 the calibration scores by the likelihood ratio of the new trip's conditions;
@@ -43,7 +49,7 @@ import pandas as pd
 
 from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain
 
-__all__ = ["FIT_LEVEL", "GAP_RATE_FLOOR", "MAX_INFLATION", "MIN_SHIFTED_TRIPS", "GapRate",
+__all__ = ["FIT_LEVEL", "GAP_RATE_CAP", "GAP_RATE_FLOOR", "MAX_INFLATION", "MIN_SHIFTED_TRIPS", "GapRate",
            "fold_gaps"]
 
 FIT_LEVEL = 0.9
@@ -51,6 +57,9 @@ FIT_LEVEL = 0.9
 
 GAP_RATE_FLOOR = 0.1
 """Smallest learned rate: the width grows at least 10 % per tolerance beyond the data."""
+
+GAP_RATE_CAP = 2.0
+"""Largest learned rate: the inflation then reaches its cap (3) at a gap of 2."""
 
 MIN_SHIFTED_TRIPS = 9
 """Shifted trips needed for the 0.9 quantile of their rates (``ceil(10 * 0.9) <= 9``)."""
@@ -98,25 +107,26 @@ class GapRate:
         """
         if isinstance(scores, np.ndarray) or np.ndim(scores[0]) == 0:
             scores, gaps = [scores], [gaps]
-        k = []
+        k, w = [], []
         for s, g in zip(scores, gaps, strict=True):
             a, g = np.abs(np.asarray(s, float)), np.asarray(g, float)
             if a.shape != g.shape:
                 raise ValueError(f"scores and gaps must have one value per trip; got "
                                  f"{a.shape}, {g.shape}")
-            inside = a[g <= 1.0]
-            if len(inside) < 2 or not (g > 1.0).any():
+            out = g > 1.0
+            if not out.any() or a.size < 9:
                 continue
-            q = _conformal_quantile(inside, level) if len(inside) >= 9 else inside.max()
-            k.append((a[g > 1.0] / max(q, 1e-12) - 1.0) / (g[g > 1.0] - 1.0))
+            inside = a[~out] if (~out).sum() >= 9 else a
+            q = max(_conformal_quantile(inside, level), 1e-12)
+            k.append((a[out] / q - 1.0) / (g[out] - 1.0))
+            w.append(g[out] - 1.0)
         k = np.concatenate(k) if k else np.zeros(0)
         self.n_shifted_ = int(k.size)
         self.learned_ = bool(k.size >= MIN_SHIFTED_TRIPS)
-        if self.learned_:
-            rate = _conformal_quantile(k, level)
-        else:
-            rate = max(OOD_INFLATION_PER_UNIT, float(k.max()) if k.size else 0.0)
-        self.rate_ = float(max(rate, GAP_RATE_FLOOR))
+        rate = _weighted_quantile(k, np.concatenate(w), level) if k.size else 0.0
+        if not self.learned_:
+            rate = max(rate, OOD_INFLATION_PER_UNIT)
+        self.rate_ = float(np.clip(rate, GAP_RATE_FLOOR, GAP_RATE_CAP))
         return self
 
     def inflation(self, gap) -> np.ndarray:
@@ -143,6 +153,13 @@ def _conformal_quantile(values: np.ndarray, level: float) -> float:
     """The ``ceil((n + 1) level)``-th smallest value (the largest when that exceeds n)."""
     v = np.sort(np.asarray(values, float))
     return float(v[min(math.ceil((v.size + 1) * level), v.size) - 1])
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level: float) -> float:
+    """Smallest value whose cumulative weight share reaches ``level``."""
+    order = np.argsort(values)
+    cum = np.cumsum(weights[order]) / max(float(weights.sum()), 1e-300)
+    return float(values[order][min(int(np.searchsorted(cum, level)), values.size - 1)])
 
 
 def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
