@@ -41,6 +41,12 @@ the factor scales the spread about the centre, so the median barely depends on i
 An unfitted model predicts the physics only (with a
 :class:`~hybridev.learning.model.PhysicsFallbackWarning`): every band collapses
 to the physics range. The SoC fan chart is :mod:`hybridev.apps.range_plot`.
+
+Module size (about 420 lines, over the package's 400-line guide): the input
+checks (shared with :mod:`~hybridev.apps.range_plot` and
+:mod:`~hybridev.apps.route`), the drive's legs and weights, the floor and the
+root solve share the grid arrays; the sum of legs lives in
+:mod:`hybridev.apps.drive`.
 """
 
 from __future__ import annotations
@@ -170,7 +176,8 @@ def _check_quantiles(quantiles) -> np.ndarray:
 
 # -- the drive: legs and their weights -----------------------------------------------------
 _ANCHORS = np.array([1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0])  # soaked first legs, x L
-_T_SOAKED, _T_HALF, _T_WARM = len(_ANCHORS), len(_ANCHORS), len(_ANCHORS) + 1
+_T_SOAKED, _T_HALF, _T_WARM = len(_ANCHORS) - 1, len(_ANCHORS), len(_ANCHORS) + 1
+"""Leg types: the full soaked leg, the warm half leg, the warm leg (after the anchors)."""
 _N_TYPES = len(_ANCHORS) + 2  # soaked anchors, a warm half leg, a warm leg
 
 
@@ -263,7 +270,7 @@ def _centre_km(drive: _Drive, budget: np.ndarray) -> np.ndarray:
     p = next(iter(drive.pieces.values()))
     n = len(budget)
     mean = p.mean().reshape(n, _N_TYPES)
-    e1 = np.maximum(mean[:, _T_SOAKED - 1], _MIN_KWH_PER_KM * drive.leg_km)
+    e1 = np.maximum(mean[:, _T_SOAKED], _MIN_KWH_PER_KM * drive.leg_km)
     k = np.maximum(mean[:, _T_WARM] / drive.leg_km, _MIN_KWH_PER_KM)
     return np.where(budget <= e1, drive.leg_km * budget / e1,
                     drive.leg_km + (budget - e1) / k)
@@ -412,8 +419,8 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     if "in_domain" in drive.table.columns:  # the drive's legs (all within training distances)
         ok = drive.table["in_domain"].to_numpy(bool).reshape(len(cond), -1)
         score = drive.table["domain_score"].to_numpy(float).reshape(len(cond), -1)
-        out["in_domain"] = ok[:, [_T_SOAKED - 1, _T_WARM]].all(axis=1)
-        out["domain_score"] = score[:, [_T_SOAKED - 1, _T_WARM]].max(axis=1)
+        out["in_domain"] = ok[:, [_T_SOAKED, _T_WARM]].all(axis=1)
+        out["domain_score"] = score[:, [_T_SOAKED, _T_WARM]].max(axis=1)
         n_out = int((~out["in_domain"]).sum())
         if n_out:
             warn_out_of_domain(n_out, len(out), stacklevel=3,
