@@ -219,7 +219,7 @@ class HybridModel(RefitGuardMixin, HybridParams):
         t0 = time.perf_counter()
         good, traces, table = fitting.fit_inputs(self, measured_trips, timeseries)
         split = fitting.split_trips(self, good, table, groups, seed)
-        for attr in ("physics_", "learner_", "domain_", "calibrator_"):
+        for attr in ("physics_", "learner_", "domain_", "calibrator_", "planned_", "gap_rate_"):
             self.__dict__.pop(attr, None)
         # 1. physics: heater kind, posterior and discrepancy (calibration trips held out)
         self.physics_, heater = fitting.fit_physics(self, good, split, traces, seed)
@@ -234,6 +234,9 @@ class HybridModel(RefitGuardMixin, HybridParams):
         # 4. summary
         info = self.fit_info_ = fitting.fit_summary(self, good, split, heater, seed,
                                                     (xs, e_meas, e_phys, scale))
+        # 5. planned trips (no logged trace) and the out-of-domain widening rate
+        self.planned_, self.gap_rate_, self.domain_ = fitting.fit_planned(
+            self, good, traces, split, e_meas, seed)
         if traces is not None and self.domain_.needs_trace:
             info["trace_gap_rel"] = trace_gap(self, good, e_meas, traces)  # learning.ood
         info["fit_seconds"] = fitting.elapsed(t0)

@@ -19,11 +19,17 @@ the next a named value (:mod:`hybridev.learning.steps`)::
 4. :func:`~hybridev.learning.predictive.build_distribution`: the raw
    :class:`~hybridev.learning.predictive.EnergyDistribution`;
 5. :class:`~hybridev.learning.calibrate.Calibrator`: the conformal interval (split, CV+,
-   Mondrian; or the conformal spread factor of a distribution);
-6. :class:`~hybridev.learning.ood.OutOfDomainSpread`: wider intervals off the domain;
+   Mondrian; or the conformal spread factor of a distribution); then, for planned trips
+   (no logged trace) of a model fitted on traces, the
+   :class:`~hybridev.learning.planned.PlannedTripCalibrator` (their mean correction and
+   their own conformal interval; the rows come from the
+   :class:`~hybridev.learning.steps.DomainAssessment`);
+6. :class:`~hybridev.learning.ood.OutOfDomainSpread`: wider intervals off the domain (at
+   the learned rate :class:`~hybridev.learning.shift.GapRate` when the model has one);
 7. :mod:`hybridev.learning.physical`: the physical energy floor and the final SoC.
 
-``predict`` stops after step 4 (the mean, floored, in step 7); ``predict_distribution``
+``predict`` stops after step 4 (the mean, with the planned trips' mean correction,
+floored, in step 7); ``predict_distribution``
 after step 6 (a per-trip spread factor). No step calls back into an earlier one.
 
 **The distribution.** For a trip with features ``x``, posterior draws ``theta_d``
@@ -68,6 +74,7 @@ from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
 from hybridev.learning.physical import interval_columns, point_columns
+from hybridev.learning.planned import planned_rows
 from hybridev.learning.predictive import EnergyDistribution, build_distribution, raw_prediction
 from hybridev.physics.trips import append_columns
 
@@ -85,6 +92,8 @@ class _Parts:
     learner: object  # ResidualLearner or None (unfitted)
     domain: object  # TrainingDomain or None
     calibrator: object  # Calibrator or None
+    planned: object  # PlannedTripCalibrator or None (learning.planned)
+    gap_rate: object  # GapRate or None (learning.shift)
     n_draws: int
     distance_range: list | None
     noise_rel: float
@@ -99,10 +108,16 @@ class _Parts:
         post = stage.posterior_
         return cls(stage, stage.vehicle(), state["learner_"] if fitted else None,
                    state.get("domain_") if fitted else None,
-                   state.get("calibrator_"), int(model.n_posterior_draws),
+                   state.get("calibrator_"), state.get("planned_") if fitted else None,
+                   state.get("gap_rate_") if fitted else None, int(model.n_posterior_draws),
                    info.get("distance_km_range"),
                    float(np.median(post.noise_rel)) if post is not None else 0.0,
                    float(info.get("trace_gap_rel", 0.0)))
+
+    def ood(self) -> OutOfDomainSpread:
+        """Step 6 of this model (the learned widening rate when it has one)."""
+        return OutOfDomainSpread(noise_rel=self.noise_rel, trace_gap_rel=self.trace_gap_rel,
+                                 rate=self.gap_rate)
 
     def folds(self) -> tuple[list, list]:
         """The CV+ fold ensembles and their physics (None: the model's), or ``([], [])``."""
@@ -201,14 +216,19 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
         modes=True, warn=True)
     raw = raw_prediction(draws.tables[0], dists, mode_means)
-    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
+    ood = parts.ood()
+    planned = planned_rows(parts.planned, assessment)  # trips without a logged trace
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
+        if planned is not None:  # 5 (planned trips)
+            raw, factor = parts.planned.spread(raw, factor, level, planned)
         d = raw.dist
         return EnergyDistribution(d.physics_draws_kwh, d.residual_mean_kwh, d.residual_std_kwh,
                                   spread_factor=ood.spread_factor(assessment, raw, factor))  # 6
     ok = np.ones(len(raw.mean), dtype=bool) if assessment is None else assessment.in_domain
     calibrated = parts.calibrator.calibrate(raw, level, ok)  # 5 calibrator
+    if planned is not None:  # 5 (planned trips)
+        raw, calibrated = parts.planned.calibrate(raw, calibrated, level, planned)
     wide, confidence = ood.widen(assessment, raw, calibrated, level)  # 6 out-of-domain
     score = np.zeros(len(ok)) if assessment is None else assessment.score
     return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
@@ -231,6 +251,8 @@ def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
     if learner is not None:
         energy = learner.point_of_columns(cols, len(e_phys), parts.distance_range,  # 3-4
                                           dom)
+        if (planned := planned_rows(parts.planned, assessment)) is not None:  # 5 (planned)
+            energy = parts.planned.correct_point(energy, cols, planned)
         out = point_columns(cols, energy, vehicle)  # 7 output
     else:
         out = point_columns(cols, e_phys, vehicle, floor=False)
@@ -275,7 +297,5 @@ def ood_sd(model, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray, var_draws
         return np.stack([learner.point(physics_draws(model, sub.assign(mode=m), traces)[0],
                                        dom) for m in MODE_NAMES])
 
-    parts = _Parts.of(model)
-    ood = OutOfDomainSpread(noise_rel=parts.noise_rel, trace_gap_rel=parts.trace_gap_rel)
-    sd_ood = ood.sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
+    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
     return assessment.score, assessment.in_domain, sd_ood
