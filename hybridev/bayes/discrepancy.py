@@ -199,9 +199,15 @@ class TermDiscrepancy:
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> TermDiscrepancy:
         """Inverse of :meth:`to_arrays` (``ValueError`` on missing or bad arrays)."""
         try:
-            return cls(arrays["weights"], arrays["cov"], arrays["active"],
+            w, active, upper = arrays["weights"], arrays["active"], arrays.get("upper")
+            if np.size(w) == N_TERMS - 1 and np.size(active) == N_TERMS - 1:
+                # saved before the regen-limit term (the last, regen_capped_kwh): weight 1,
+                # inactive, unbounded (the term is zero without a regen limit)
+                w, active = np.r_[np.ravel(w), 1.0], np.r_[np.ravel(active), False]
+                upper = None if upper is None else np.r_[np.ravel(upper), np.inf]
+            return cls(w, arrays["cov"], active,
                        float(np.asarray(arrays["shrinkage"]).reshape(-1)[0]),
-                       upper=arrays.get("upper"))  # models saved before the bound: none
+                       upper=upper)  # models saved before the bound: none
         except KeyError as err:
             raise ValueError(f"saved discrepancy is missing array {err}") from None
 

@@ -74,7 +74,6 @@ from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
 from hybridev.learning.physical import interval_columns, point_columns
-from hybridev.learning.planned import planned_rows
 from hybridev.learning.predictive import EnergyDistribution, build_distribution, raw_prediction
 from hybridev.physics.trips import append_columns
 
@@ -126,6 +125,15 @@ class _Parts:
             return [], []
         nets = list(cal.fold_nets_ or [])
         return nets, list(cal.fold_physics_ or [None] * len(nets))
+
+
+def _planned_rows(parts: _Parts, assessment) -> np.ndarray | None:
+    """Trips (n_trips,) bool that go to the planned-trip calibrator: those without a logged
+    trace (from the assessment) when the model has one; None when there are none."""
+    if parts.planned is None or assessment is None or assessment.has_trace is None:
+        return None
+    rows = ~assessment.has_trace
+    return rows if rows.any() else None
 
 
 def _entries(physics: list) -> tuple[list, list[int]]:
@@ -217,7 +225,7 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         modes=True, warn=True)
     raw = raw_prediction(draws.tables[0], dists, mode_means)
     ood = parts.ood()
-    planned = planned_rows(parts.planned, assessment)  # trips without a logged trace
+    planned = _planned_rows(parts, assessment)  # trips without a logged trace
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
         if planned is not None:  # 5 (planned trips)
@@ -251,7 +259,7 @@ def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
     if learner is not None:
         energy = learner.point_of_columns(cols, len(e_phys), parts.distance_range,  # 3-4
                                           dom)
-        if (planned := planned_rows(parts.planned, assessment)) is not None:  # 5 (planned)
+        if (planned := _planned_rows(parts, assessment)) is not None:  # 5 (planned)
             energy = parts.planned.correct_point(energy, cols, planned)
         out = point_columns(cols, energy, vehicle)  # 7 output
     else:

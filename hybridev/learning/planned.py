@@ -45,7 +45,7 @@ In the predictive path (:mod:`hybridev.learning.pipeline`) the calibrator is
 the component ``planned_`` of the model, made by
 :func:`hybridev.learning.fitting.fit_planned`. Its trips are those the
 :class:`~hybridev.learning.steps.DomainAssessment` finds without a logged trace
-(:func:`planned_rows`). It acts once, right after the
+(``has_trace``). It acts once, right after the
 :class:`~hybridev.learning.calibrate.Calibrator` (step 5), on those rows only:
 :meth:`PlannedTripCalibrator.calibrate` scales their raw prediction by the mean
 correction and gives them ``mu +- q s``; :meth:`PlannedTripCalibrator.spread`
@@ -62,9 +62,9 @@ import pandas as pd
 
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import raw_prediction
-from hybridev.learning.steps import CalibratedInterval, DomainAssessment, RawPrediction
+from hybridev.learning.steps import CalibratedInterval, RawPrediction
 
-__all__ = ["PlannedTripCalibrator", "conditions_of", "planned_rows"]
+__all__ = ["PlannedTripCalibrator", "conditions_of"]
 
 
 @dataclasses.dataclass
@@ -308,11 +308,3 @@ def conditions_of(table: pd.DataFrame) -> np.ndarray:
     return np.column_stack([table["avg_speed_kmh"].to_numpy(float),
                             table["temperature_c"].to_numpy(float)])
 
-
-def planned_rows(planned, assessment: DomainAssessment | None) -> np.ndarray | None:
-    """Trips (n_trips,) bool predicted as planned trips: those without a logged trace when
-    the model has a planned-trip calibrator ``planned``; None when there are none."""
-    if planned is None or assessment is None or assessment.has_trace is None:
-        return None
-    rows = ~assessment.has_trace
-    return rows if rows.any() else None

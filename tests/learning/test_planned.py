@@ -256,3 +256,43 @@ def test_fold_gaps_score_each_trip_against_its_folds_domain():
     # split: the calibration trips (fold 0) against the others (-1)
     gs = fold_gaps(t, np.array([-1, -1, -1, -1, 0, 0]))
     np.testing.assert_allclose(gs, [0, 0, 0, 0, *dom.gap(t.iloc[4:])])
+
+
+def test_planned_trips_pass_the_components_once_in_order(fitted):
+    """The planned-trip calibrator is part of step 5 (after the Calibrator), the learned
+    rate part of step 6: the path keeps one direction (tests/learning/test_pipeline.py)."""
+    import sys
+    from pathlib import Path
+
+    import hybridev
+
+    pkg = Path(hybridev.__file__).resolve().parent / "learning"
+    m, _, _, test, _ = fitted
+    x = test.drop(columns=["energy_kwh"]).head(10)
+
+    def stages(call):
+        seen = []
+
+        def prof(frame, event, arg):
+            if event != "call" or frame.f_back is None:
+                return
+            callee = Path(frame.f_code.co_filename)
+            if frame.f_back.f_code.co_filename == str(pkg / "pipeline.py") and \
+                    callee.parent == pkg and callee.stem not in ("pipeline", "steps"):
+                if not seen or seen[-1] != callee.stem:
+                    seen.append(callee.stem)
+
+        sys.setprofile(prof)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                call()
+        finally:
+            sys.setprofile(None)
+        return seen
+
+    assert stages(lambda: m.predict_interval(x, 0.9)) == [
+        "physics_stage", "domain", "residual", "predictive", "calibrate", "planned", "ood",
+        "physical"]
+    assert stages(lambda: m.predict(x)) == ["physics_stage", "domain", "residual", "planned",
+                                            "physical"]
