@@ -27,20 +27,24 @@ scored trips by at least 10 % (else ``coef_`` is zero: no correction); the
 speed and temperature are held inside those of the scored trips (no
 extrapolation of the correction).
 
-The signed normalised scores ``(E - mu) / s`` (``mu``, ``s``: the scoring
-model's corrected summary-only predictive mean and standard deviation) make a
-:class:`PlannedTripCalibrator`. A planned trip's interval: with CV+, the CV+
-interval of these scores from the fold models' summary-only predictions of it
-(the models that made the scores); with split conformal, ``mu +- q s`` from the
-final model, ``q`` the conformal quantile of the scores of the trips *inside
-their fold's training domain* (``fold_gaps <= 1``; those outside teach the
-widening rate, :mod:`hybridev.learning.shift`). ``predict_distribution`` scales
-a planned trip's spread by :meth:`PlannedTripCalibrator.spread_factor` (range
-and charging use it). A trip is not out of the domain because it lacks a trace:
-with a calibrator the domain is recorded with ``needs_trace=False``. Models saved
+The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
+summary-only predictive mean and standard deviation of the scoring model) make
+a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
+conformal interval ``mu +- q s`` with the final model's summary-only ``mu``
+and ``s`` and ``q`` the conformal quantile of the scores of the scored trips
+*inside their fold's training domain* (``fold_gaps <= 1``); trips outside it
+teach the widening rate instead (:mod:`hybridev.learning.shift`).
+:meth:`HybridModel.predict_distribution` scales the spread of a planned trip
+by :meth:`PlannedTripCalibrator.spread_factor` (range and charging use it).
+
+A trip is not out of the domain because it lacks a trace: with a calibrator
+the model's domain is recorded with ``needs_trace=False``. Models saved
 without this state (older files, or fitted without traces) behave as before.
-The model-facing functions below are the one-line hooks of ``model.py``,
-``uncertainty.py`` and ``ood.py``.
+
+The model-facing functions (:func:`fit_planned`, :func:`interval_bounds`,
+:func:`spread_factors`, :func:`gap_inflation`, :func:`planned_arrays`,
+:func:`set_planned_state`) are the hooks that ``model.py``, ``uncertainty.py``
+and ``ood.py`` call, each from one line.
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.conformal import CVPlusConformal, NormalizedConformal
+from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, domain_quantities
 from hybridev.learning.shift import MAX_INFLATION, GapRate, fold_gaps
 
@@ -207,7 +211,8 @@ _MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 
 def _design(conditions: np.ndarray) -> np.ndarray:
     """Columns of :data:`_CORRECTION_TERMS` from (n, 2) speed (km/h), temperature (°C)."""
     c = np.atleast_2d(conditions)
-    return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)), c[:, 1] / 10])
+    return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)),
+                            c[:, 1] / 10.0])
 
 
 def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -311,14 +316,10 @@ def gap_inflation(model, gap) -> np.ndarray:
 
 
 def interval_bounds(model, table: pd.DataFrame, traces, mu, sd, level: float,
-                    lo, hi, lo_one, *, folds=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    lo, hi, lo_one) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``predict_interval``'s bounds with planned trips and the learned widening.
 
     Planned rows get ``mu +- q_planned s`` (and the one-sided planned bound);
-    with ``folds`` (the CV+ fold models' summary-only means and spreads, each
-    (n_folds, n_trips)) and one planned score per CV+ trip, the CV+ interval of
-    the planned scores instead: the scores came from those fold models, so the
-    interval is built from the same models' predictions of the new trip;
     with a learned rate, rows outside the domain (intensive gap ``g > 1``) are
     at least ``mu +- q s inflation(g)`` with their mode's ``q``. Other rows
     are returned unchanged. Arrays (n_trips,), kWh.
@@ -345,13 +346,6 @@ def interval_bounds(model, table: pd.DataFrame, traces, mu, sd, level: float,
         q[plan], q1[plan] = qp, float(-pc.lower_bound(0.0, 1.0, level))
         lo[plan], hi[plan] = mu[plan] - qp * sd[plan], mu[plan] + qp * sd[plan]
         lo_one[plan] = mu[plan] - q1[plan] * sd[plan]
-        fold = getattr(cp, "fold", None)
-        if folds is not None and fold is not None and fold.shape == pc.residuals_.shape:
-            cvp = CVPlusConformal(pc.residuals_, fold)
-            fm, fs = (np.asarray(a)[:, plan] for a in folds)
-            lo_p, hi_p = cvp.cv_interval(fm, fs, level)
-            lo[plan], hi[plan] = np.minimum(lo_p, mu[plan]), np.maximum(hi_p, mu[plan])
-            lo_one[plan] = cvp.cv_lower_bound(fm, fs, level)
     if rate_ is not None and cp is not None:
         gap = model.domain_.gap(table, traces)
         out = (gap > 1.0) & np.isfinite(q)

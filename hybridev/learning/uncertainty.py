@@ -483,8 +483,7 @@ class ProbabilisticMixin(OutOfDomainMixin):
             hi = np.where(ok, hi, mu + q * sd)
             lo_one = np.where(ok, lo_one, self.conformal_.lower_bound(mu, sd, level))
         # planned trips (no trace) and the learned out-of-domain widening (learning.planned)
-        lo, hi, lo_one = interval_bounds(self, table, traces, mu, sd, level, lo, hi, lo_one,
-                                         folds=(fm, fs) if cv else None)
+        lo, hi, lo_one = interval_bounds(self, table, traces, mu, sd, level, lo, hi, lo_one)
         # out of the domain: mu +- z sd_ood (learning.ood), never narrower than that
         lo = np.where(ok, lo, np.minimum(lo, mu - z2 * sd_ood))
         hi = np.where(ok, hi, np.maximum(hi, mu + z2 * sd_ood))
