@@ -38,14 +38,14 @@ quantities: a trip summary does not carry it.)
 Inputs the model was trained with but a trip lacks also leave the domain
 (score at least :data:`MISSING_INPUT_SCORE`): a driving ``mode`` when every
 training trip had one, a logged trace when most training trips had one, unless the model
-calibrated trips predicted without their trace (:mod:`hybridev.learning.planned`:
-it then fits with ``needs_trace=False``, and a planned trip is in the domain
-when its conditions are).
+calibrated trips predicted without their trace (:mod:`hybridev.learning.planned`,
+:func:`hybridev.learning.fitting.fit_planned`: the domain is then recorded with
+``needs_trace=False``, and a planned trip is in the domain when its conditions are).
 
 Out-of-domain trips get intervals from the physics posterior predictive plus
 an inflation that grows with the score (see :mod:`hybridev.learning.ood`; its
 rate is learned at fit from out-of-fold trips outside their fold's domain,
-:mod:`hybridev.learning.planned`, else :data:`OOD_INFLATION_PER_UNIT`), and
+:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`), and
 the network inputs of every trip are clipped to their training range
 (:meth:`TrainingDomain.clip_features`), so that the residual does not
 extrapolate: outside the training distances it keeps its boundary value.

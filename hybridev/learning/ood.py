@@ -3,8 +3,11 @@
 A trip outside the training domain gets the spread ``sd_ood`` instead of the
 model's own (conformally calibrated) one:
 
-* outside the training ranges or in a gap of them (largest gap ``g > 1``):
-  ``sqrt(var_draws + inflation(g)^2 * rest)``, with
+* outside the training ranges or in a gap of them (largest intensive gap ``g > 1``):
+  ``sqrt(var_draws + inflation(g)^2 * rest)`` (``inflation`` at the rate learned at fit,
+  :class:`~hybridev.learning.shift.GapRate`, when the model has one; with it the
+  interval is also at least ``mu +- q s inflation(g)`` with the trip's own conformal
+  ``q``), with
   ``rest = (noise_rel E_p)^2 + (mu - E_p)^2 + max(sd^2 - var_draws, 0)``: the
   physics posterior predictive (the spread of the posterior draws,
   ``var_draws``, and the posterior's relative noise ``noise_rel``), the
