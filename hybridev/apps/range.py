@@ -336,7 +336,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     conditions : pandas.DataFrame, (n_rows, ...), or dask.dataframe.DataFrame
         (a lazy dask DataFrame comes back, :mod:`hybridev.fleet.range`;
         ``soc_initial`` and ``soc_reserve`` must then be scalars)
-        ``avg_speed_kmh`` (km/h), ``temperature_c`` (degC), optional ``mode``
+        ``avg_speed_kmh`` (km/h), ``temperature_c`` (°C), optional ``mode``
         (may be missing or ``None``), ``hour`` (h), ``grade_pct`` (%) and
         ``trip_id`` (key of the synthesised trace). A ``distance_km`` or
         ``soc_initial`` column is an error (the distance is the unknown; the

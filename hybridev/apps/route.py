@@ -140,7 +140,7 @@ def split_route(points: pd.DataFrame, *, temperature_c=None, speed_profile=None,
     points : pandas.DataFrame
         A route's point table.
     temperature_c : float, optional
-        Ambient temperature, degC; default the points' ``temperature_c``
+        Ambient temperature, °C; default the points' ``temperature_c``
         (a route without one needs it).
     speed_profile : float or pandas.DataFrame, optional
         See the module docstring.
@@ -180,7 +180,7 @@ def split_route(points: pd.DataFrame, *, temperature_c=None, speed_profile=None,
                          "a table of from_km, speed_kmh), or a route with speed_limit_kmh or "
                          "point times")
     if temperature_c is None and "temperature_c" not in points.columns:
-        raise ValueError("the route has no temperature: give temperature_c (degC, [-50, 60])")
+        raise ValueError("the route has no temperature: give temperature_c (°C, [-50, 60])")
     if temperature_c is not None:
         temperature_c = _check_unit("temperature_c", temperature_c, -50.0, 60.0)
     cuts = np.unique(np.round(cuts, 9))
@@ -260,7 +260,7 @@ def predict_route(model, route, *, soc_initial: float, temperature_c=None, speed
     soc_initial : float
         SoC at departure, (0, 1].
     temperature_c : float, optional
-        Ambient temperature, degC, [-50, 60]; default the route's ``temperature_c``.
+        Ambient temperature, °C, [-50, 60]; default the route's ``temperature_c``.
     speed_profile : float or pandas.DataFrame, optional
         Mean speed (km/h) or a table of ``from_km``, ``speed_kmh``; default the
         route's times or speed limits (module docstring).

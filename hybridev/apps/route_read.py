@@ -5,7 +5,7 @@ A route is a table of points along the road, in driving order (:data:`POINT_COLU
 * ``distance_km`` (km from the start, non-decreasing) and ``elevation_m`` (m);
 * optional ``speed_limit_kmh`` (km/h, the limit from this point on), ``time_s``
   (s from the start: a planner's timetable, or a recorded drive) and
-  ``temperature_c`` (degC).
+  ``temperature_c`` (°C).
 
 Sources (:func:`read_route`):
 

@@ -198,16 +198,17 @@ class TermDiscrepancy:
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> TermDiscrepancy:
         """Inverse of :meth:`to_arrays` (``ValueError`` on missing or bad arrays)."""
+        arrays = dict(arrays)
+        if np.asarray(arrays.get("weights", ())).size == N_TERMS - 1:
+            # saved before the regen-limit term (the last one): that term is zero for
+            # the vehicles of such files (no limit), so it joins inactive at weight 1
+            for key, pad in (("weights", 1.0), ("active", False), ("upper", np.inf)):
+                if key in arrays:
+                    arrays[key] = np.append(np.asarray(arrays[key]).reshape(-1), pad)
         try:
-            w, active, upper = arrays["weights"], arrays["active"], arrays.get("upper")
-            if np.size(w) == N_TERMS - 1 and np.size(active) == N_TERMS - 1:
-                # saved before the regen-limit term (the last, regen_capped_kwh): weight 1,
-                # inactive, unbounded (the term is zero without a regen limit)
-                w, active = np.r_[np.ravel(w), 1.0], np.r_[np.ravel(active), False]
-                upper = None if upper is None else np.r_[np.ravel(upper), np.inf]
-            return cls(w, arrays["cov"], active,
+            return cls(arrays["weights"], arrays["cov"], arrays["active"],
                        float(np.asarray(arrays["shrinkage"]).reshape(-1)[0]),
-                       upper=upper)  # models saved before the bound: none
+                       upper=arrays.get("upper"))  # models saved before the bound: none
         except KeyError as err:
             raise ValueError(f"saved discrepancy is missing array {err}") from None
 

@@ -24,8 +24,9 @@ import pandas as pd
 from scipy import stats as sps
 
 from hybridev.bayes.likelihood import PREDICTED_FLOOR_REL
+from hybridev.physics.stats import energy_from_stats
 
-__all__ = ["OUTLIER_COLUMNS", "OUTLIER_TAIL_PROB", "trip_residuals"]
+__all__ = ["OUTLIER_COLUMNS", "OUTLIER_TAIL_PROB", "attach_outliers", "trip_residuals"]
 
 OUTLIER_TAIL_PROB = 1e-3
 """Two-sided tail probability below which a trip is reported as an outlier (about 1 in
@@ -110,3 +111,29 @@ def trip_residuals(trip_id, energy_kwh, predicted_kwh, sigma: float, *, group_sd
         "residual_rel": r, "z": z, "weight": w, "tail_prob": p, "outlier": out,
         "reason": [_reason(a, b, c) for a, b, c in zip(e, r, out, strict=True)]},
         columns=OUTLIER_COLUMNS)
+
+
+def attach_outliers(post, stats, trips: pd.DataFrame, energy_kwh: np.ndarray, groups,
+                    noise_dof: float | None) -> None:
+    """Residuals of every trip at ``post``'s median; the outliers go to ``post.diagnostics``.
+
+    Sets ``diagnostics["n_outliers"]`` and ``diagnostics["outliers"]`` (a list of
+    records with :data:`OUTLIER_COLUMNS`, JSON-able), read by
+    ``PhysicsPosterior.outliers_``. ``stats`` are the calibration's statistics,
+    ``groups`` its group codes (None: independent trips).
+    """
+    med = post.median()
+    draw = np.array([[med[n] for n in post.param_names]])
+    e = energy_from_stats(stats, post.as_params(draw))[0]
+    d = post.diagnostics
+    sigma = d.get("sigma_within", med["noise_rel"])
+    tau = d.get("group_sd", 0.0) if groups is not None else 0.0
+    if noise_dof is not None:  # back from the reported sds to the t's scales
+        sigma, tau = (x * np.sqrt((noise_dof - 2.0) / noise_dof) for x in (sigma, tau))
+    ids = trips["trip_id"].to_numpy(object) if "trip_id" in trips.columns else trips.index
+    res = trip_residuals(ids, energy_kwh, e, sigma, group_sd=tau, groups=groups,
+                         noise_dof=noise_dof)
+    flagged = res[res["outlier"]]
+    d["n_outliers"] = len(flagged)
+    d["outliers"] = [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+                     for row in flagged.to_dict(orient="records")]

@@ -50,7 +50,7 @@ import pandas as pd
 from hybridev.bayes.groups import AUTO_GROUP_COLUMNS, _group_codes, auto_group_labels, group_labels
 from hybridev.bayes.heater import select_heater_kind
 from hybridev.bayes.likelihood import PREDICTED_FLOOR_REL, _LogPosterior, _map_and_cov
-from hybridev.bayes.outliers import trip_residuals
+from hybridev.bayes.outliers import attach_outliers
 from hybridev.bayes.posterior import PhysicsPosterior, vehicle_with
 from hybridev.bayes.priors import (
     CLIMATE_PARAMS,
@@ -342,28 +342,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         elapsed_s=time.perf_counter() - t0, n_group=n_group, noise_dof=pr.noise_dof)
     if heater is not None:
         post.diagnostics["heater"] = heater.to_dict()
-    _attach_outliers(post, stats, trips, y, codes, names, n_group, pr)
+    attach_outliers(post, stats, trips, y, codes if n_group else None, pr.noise_dof)
     return post
-
-
-def _attach_outliers(post: PhysicsPosterior, stats, trips: pd.DataFrame, y: np.ndarray, codes,
-                     names, n_group: int, prior: PhysicsPrior) -> None:
-    """Per-trip residuals at the posterior median; the outliers go to ``diagnostics``."""
-    med = post.median()
-    e = energy_from_stats(stats, post.as_params(np.array([[med[n] for n in names]])))[0]
-    d = post.diagnostics
-    dof = prior.noise_dof
-    sigma = d.get("sigma_within", med["noise_rel"])
-    tau = d.get("group_sd", 0.0) if n_group else 0.0
-    if dof is not None:  # back from the reported sds to the t's scales
-        sigma, tau = (x * np.sqrt((dof - 2.0) / dof) for x in (sigma, tau))
-    ids = trips["trip_id"].to_numpy(object) if "trip_id" in trips.columns else trips.index
-    res = trip_residuals(ids, y, e, sigma, group_sd=tau, groups=codes if n_group else None,
-                         noise_dof=dof)
-    flagged = res[res["outlier"]]
-    d["n_outliers"] = len(flagged)
-    d["outliers"] = [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
-                     for row in flagged.to_dict(orient="records")]
 
 
 def simulate_measured(trips: pd.DataFrame, vehicle: VehicleParams | None = None,

@@ -150,7 +150,7 @@ def check_inputs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> N
                 raise ValueError(f"{what}: no file matches")
             continue
         try:
-            st = os.stat(os.path.expanduser(value))
+            os.stat(os.path.expanduser(value))
         except FileNotFoundError:
             raise ValueError(f"{what} does not exist") from None
         except OSError as exc:
@@ -161,7 +161,6 @@ def check_inputs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> N
                              "'hybridev fit'")
         if action.dest not in ("model", *_DATASET_DESTS) and is_dir:
             raise ValueError(f"{what} is a folder; give a .csv or .parquet file")
-        del st
 
 
 def option_of(parser: argparse.ArgumentParser, args: argparse.Namespace,

@@ -24,8 +24,8 @@ from hybridev.learning.residual import ResidualLearner
 from hybridev.learning.shift import GapRate
 from hybridev.physics.params import VehicleParams
 
-__all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "require_fitted",
-           "require_probabilistic", "restore"]
+__all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "physics_of",
+           "require_fitted", "require_probabilistic", "restore"]
 
 NAMES = ("physics", "learner", "domain", "calibrator", "planned", "gap_rate")
 """The components, in the order a fit makes them (attributes ``physics_``, ...); a model
@@ -77,6 +77,15 @@ def new_physics(model) -> PhysicsStage:
         physics_params=model.physics_params,
         calibrate=bool(model.calibrate_physics) and model._residual,
         discrepancy=bool(model.discrepancy), relative=model.residual_target == "relative")
+
+
+def physics_of(model) -> PhysicsStage:
+    """``model``'s fitted physics stage (with the model's current ``vehicle``, e.g. another
+    battery capacity set after loading), or an unfitted one of its settings."""
+    stage = model.__dict__.get("physics_")
+    if stage is None:
+        return new_physics(model)
+    return stage.for_vehicle(model.vehicle or _PAPER_VEHICLE)
 
 
 def new_learner(model) -> ResidualLearner:

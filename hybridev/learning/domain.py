@@ -314,10 +314,11 @@ class TrainingDomain:
                     reasons[f"missing {name}"] = int(lacking.sum())
             if warn:
                 warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
-        ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
         out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
-                               no_mode=no_mode, reasons=reasons, ood_gap=ood_gap,
-                               inflation=self.inflation(ood_gap), has_trace=has_trace)
+                               no_mode=no_mode, reasons=reasons, has_trace=has_trace)
+        if reasons:  # some trip is out: the gap and inflation of its out-of-domain spread
+            out.ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
+            out.inflation = self.inflation(out.ood_gap)
         if fade and n:
             out.fade = None if np.all(gap <= 1.0) else self.discrepancy_fade(gap)
             sub = gap[no_mode]

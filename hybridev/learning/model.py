@@ -135,9 +135,8 @@ class HybridModel(RefitGuardMixin, HybridParams):
                 if self.__dict__.get(f"{k}_") is not None}
 
     def physics_stage(self) -> PhysicsStage:
-        """The fitted physics stage, or an unfitted one of the current settings."""
-        stage = self.__dict__.get("physics_")
-        return stage if stage is not None else comp.new_physics(self)
+        """The fitted physics stage (with the current ``vehicle``), or an unfitted one."""
+        return comp.physics_of(self)
 
     def _vehicle(self) -> VehicleParams:
         return self.physics_stage().vehicle()

@@ -22,6 +22,7 @@ where ``E`` is the physics of :func:`hybridev.physics.stats.energy_from_stats` a
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 
@@ -98,6 +99,21 @@ class PhysicsStage:
     def vehicle(self) -> VehicleParams:
         """The vehicle, with the heater kind learned at fit when it was ``"auto"``."""
         return self._vehicle
+
+    def for_vehicle(self, vehicle: VehicleParams) -> PhysicsStage:
+        """This stage with another nominal vehicle (e.g. another battery capacity).
+
+        The learned state is shared; a heater kind learned at fit replaces ``"auto"``.
+        ``self`` when ``vehicle`` is this stage's own.
+        """
+        if vehicle is self.base_vehicle:
+            return self
+        other = copy.copy(self)
+        other.base_vehicle = vehicle
+        kind = self.heater_kind_
+        other._vehicle = (vehicle if kind is None or vehicle.heater_kind != "auto"
+                          else dataclasses.replace(vehicle, heater_kind=kind))
+        return other
 
     def select_heater(self, good: pd.DataFrame, traces, codes: np.ndarray
                       ) -> HeaterSelection | None:

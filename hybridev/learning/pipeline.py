@@ -69,7 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.components import new_physics
+from hybridev.learning.components import physics_of
 from hybridev.learning.conformal import CVPlusConformal
 from hybridev.learning.features import MODE_NAMES
 from hybridev.learning.ood import OutOfDomainSpread
@@ -95,28 +95,27 @@ class _Parts:
     gap_rate: object  # GapRate or None (learning.shift)
     n_draws: int
     distance_range: list | None
-    noise_rel: float
     trace_gap_rel: float
+
+    def ood(self) -> OutOfDomainSpread:
+        """Step 6's component: the posterior's median relative noise, the trace gap, the
+        learned widening rate (when the model has one)."""
+        post = self.stage.posterior_
+        return OutOfDomainSpread(
+            noise_rel=float(np.median(post.noise_rel)) if post is not None else 0.0,
+            trace_gap_rel=self.trace_gap_rel, rate=self.gap_rate)
 
     @classmethod
     def of(cls, model) -> _Parts:
         state = model.__dict__  # the components themselves: no call back into the model
-        stage = state.get("physics_") or new_physics(model)
+        stage = physics_of(model)
         fitted = hasattr(state.get("learner_"), "net_")
         info = state.get("fit_info_") or {}
-        post = stage.posterior_
         return cls(stage, stage.vehicle(), state["learner_"] if fitted else None,
                    state.get("domain_") if fitted else None,
                    state.get("calibrator_"), state.get("planned_") if fitted else None,
                    state.get("gap_rate_") if fitted else None, int(model.n_posterior_draws),
-                   info.get("distance_km_range"),
-                   float(np.median(post.noise_rel)) if post is not None else 0.0,
-                   float(info.get("trace_gap_rel", 0.0)))
-
-    def ood(self) -> OutOfDomainSpread:
-        """Step 6 of this model (the learned widening rate when it has one)."""
-        return OutOfDomainSpread(noise_rel=self.noise_rel, trace_gap_rel=self.trace_gap_rel,
-                                 rate=self.gap_rate)
+                   info.get("distance_km_range"), float(info.get("trace_gap_rel", 0.0)))
 
     def folds(self) -> tuple[list, list]:
         """The CV+ fold ensembles and their physics (None: the model's), or ``([], [])``."""
@@ -224,20 +223,20 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
         modes=True, warn=True)
     raw = raw_prediction(draws.tables[0], dists, mode_means)
-    ood = parts.ood()
     planned = _planned_rows(parts, assessment)  # trips without a logged trace
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
         if planned is not None:  # 5 (planned trips)
             raw, factor = parts.planned.spread(raw, factor, level, planned)
+        per_trip = parts.ood().spread_factor(assessment, raw, factor)  # 6 out-of-domain
         d = raw.dist
         return EnergyDistribution(d.physics_draws_kwh, d.residual_mean_kwh, d.residual_std_kwh,
-                                  spread_factor=ood.spread_factor(assessment, raw, factor))  # 6
+                                  spread_factor=per_trip)
     ok = np.ones(len(raw.mean), dtype=bool) if assessment is None else assessment.in_domain
     calibrated = parts.calibrator.calibrate(raw, level, ok)  # 5 calibrator
     if planned is not None:  # 5 (planned trips)
         raw, calibrated = parts.planned.calibrate(raw, calibrated, level, planned)
-    wide, confidence = ood.widen(assessment, raw, calibrated, level)  # 6 out-of-domain
+    wide, confidence = parts.ood().widen(assessment, raw, calibrated, level)  # 6 out-of-domain
     score = np.zeros(len(ok)) if assessment is None else assessment.score
     return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
                             residual=parts.learner.residual)
@@ -305,5 +304,6 @@ def ood_sd(model, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray, var_draws
         return np.stack([learner.point(physics_draws(model, sub.assign(mode=m), traces)[0],
                                        dom) for m in MODE_NAMES])
 
-    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
+    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist,
+                                       mode_means=mode_means)
     return assessment.score, assessment.in_domain, sd_ood

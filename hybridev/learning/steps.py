@@ -144,9 +144,10 @@ class DomainAssessment:
     fade, mode_fade : numpy.ndarray or None
         The discrepancy's weight per trip (and per trip lacking a trained-with mode),
         None where it is 1 for every trip.
-    ood_gap, inflation : numpy.ndarray, shape (n_trips,)
+    ood_gap, inflation : numpy.ndarray, shape (n_trips,), or None
         The gap of the out-of-domain spread (a missing trained-with trace counts as
-        2) and its inflation (:meth:`TrainingDomain.inflation`).
+        2) and its inflation (:meth:`TrainingDomain.inflation`); None when every trip
+        is in the domain.
     """
 
     score: np.ndarray

@@ -45,7 +45,7 @@ def test_readme_quotes_the_committed_results():
     for key in ("hybrid", "nnls_stats", "linreg_summary", "median_kwh_per_km",
                 "nominal_physics"):
         assert f"| {h['mape'][key]:.2f} % |" in readme, key
-    for size, v in h["coverage"].items():
+    for v in h["coverage"].values():
         assert f"| {v['coverage']:.3f} | {100 * v['rel_width']:.0f} % of the energy |" in readme
     r = h["risk"]
     assert f"{100 * r['mean']:.1f} % ± {100 * r['se']:.1f} %" in readme

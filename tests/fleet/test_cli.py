@@ -46,7 +46,7 @@ def test_predict_never_overwrites_foreign_output(files, client, capsys):
     rc = main(["predict", str(d / "model"), str(d / "trips"), "--out", str(d / "mine"),
                "--scheduler", client.scheduler.address])
     assert rc == 2
-    assert "not written by hybridev" in capsys.readouterr().err
+    assert "files hybridev did not write there" in capsys.readouterr().err
     assert (d / "mine" / "keep.txt").read_text() == "x"
 
 
@@ -118,6 +118,7 @@ def test_calibrate_by_refuses_options_it_cannot_use(tmp_path, capsys):
     exit 2 naming them, before any work, rather than a report that silently ignored them."""
     make_trips(4, seed=0).assign(vehicle_id="a", energy_kwh=5.0).to_csv(tmp_path / "m.csv",
                                                                           index=False)
+    (tmp_path / "ts.csv").write_text("trip_id,t_s,speed_kmh\n")  # exists: inputs are checked first
     rc = main(["calibrate", str(tmp_path / "m.csv"), "--by", "vehicle_id", "--out",
                str(tmp_path / "r"), "--timeseries", str(tmp_path / "ts.csv"),
                "--soc-initial", "0.9"])

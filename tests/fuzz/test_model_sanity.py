@@ -10,6 +10,7 @@ import io
 import json
 import shutil
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -66,30 +67,30 @@ def test_issue_cases_are_refused_naming_file_and_field(fuzz_files, tmp_path):
     # target_std = 1e300 (NaN in every interval)
     p = _copy(fuzz_files, tmp_path)
     d = _doc(p)
-    d["target_std"] = 1e300
+    d["components"]["learner"]["target_std"] = 1e300
     _write(p, d)
-    _refused(p, "target_std")
+    _refused(p, "learner.target_std")
     # NaN training-domain bounds (NaN in every prediction)
     p = _copy(fuzz_files, tmp_path)
     a = _arrays(p)
-    a["extra.domain.feature_lo"] = np.full_like(a["extra.domain.feature_lo"], np.nan)
+    a["domain.feature_lo"] = np.full_like(a["domain.feature_lo"], np.nan)
     _write(p, arrays=a)
     _refused(p, "domain.feature_lo")
     # posterior draws with a negative drag area, an efficiency of 5.0
     doc = _doc(fuzz_files / "model")
-    names = doc["extra"]["posterior"]["param_names"]
+    names = doc["components"]["physics"]["posterior"]["param_names"]
     for name, value in (("drag_area_m2", -0.2), ("drivetrain_efficiency", 5.0)):
         if name not in names:
             continue
         p = _copy(fuzz_files, tmp_path)
         a = _arrays(p)
-        a["extra.posterior_samples"][3, names.index(name)] = value
+        a["physics.posterior_samples"][3, names.index(name)] = value
         _write(p, arrays=a)
         _refused(p, "posterior_samples", name)
     # network weights of 1e30
     p = _copy(fuzz_files, tmp_path)
     a = _arrays(p)
-    a["net.w0"] = a["net.w0"] * np.float32(1e30)
+    a["learner.net.w0"] = a["learner.net.w0"] * np.float32(1e30)
     _write(p, arrays=a)
     _refused(p, "net.w0")
     # a vehicle of 99,999 kg: not the vehicle its physics posterior was calibrated on
@@ -149,7 +150,8 @@ def test_any_model_that_loads_predicts_finite_values(fuzz_files, tmp_path_factor
         doc, arrays = _doc(p), _arrays(p)
         for e in edits:
             if e[0] == "json":
-                doc[e[1]] = float(e[2]) if np.isfinite(e[2]) else e[2]
+                doc["components"]["learner"][e[1]] = (float(e[2]) if np.isfinite(e[2])
+                                                      else e[2])
             else:
                 _, key, how, value, at = e
                 a = arrays[key]
@@ -178,12 +180,15 @@ def test_any_model_that_loads_predicts_finite_values(fuzz_files, tmp_path_factor
     prop()
 
 
-def test_a_format_1_model_without_manifest_is_checked_too(fuzz_files, tmp_path):
-    p = _copy(fuzz_files, tmp_path)
+def test_a_format_1_model_without_manifest_is_checked_too(tmp_path):
+    """A model file of format 1 (no manifest: model.json carries no checksum) written by
+    the hybridev of that format (tests/learning/fixtures), then hand-edited."""
+    p = tmp_path / "format1"
+    shutil.copytree(Path(__file__).parents[1] / "learning" / "fixtures" / "format1_split", p)
+    assert not (p / MANIFEST_FILE).exists()
     d = _doc(p)
-    d["format_version"] = 1
+    assert d["format_version"] == 1
     d["target_std"] = 1e300
-    (p / MANIFEST_FILE).unlink()
     (p / DOC_FILE).write_text(json.dumps(d))
     _refused(p, "target_std")
     assert zipfile.is_zipfile(p / ARRAYS_FILE)

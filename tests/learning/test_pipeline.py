@@ -22,8 +22,10 @@ from hybridev.learning.pipeline import predictive_path, raw_distributions
 
 FIXTURES = Path(__file__).parent / "fixtures"
 PKG = Path(hybridev.__file__).resolve().parent
-STAGES = ["physics_stage", "domain", "residual", "predictive", "calibrate", "ood", "physical"]
-"""The components of the predictive path, in order (steps.py holds the values between)."""
+STAGES = ["components", "physics_stage", "domain", "residual", "predictive", "calibrate", "ood",
+          "physical"]
+"""What the predictive path calls, in order: the model's components gathered once
+(``components.physics_of``), then the steps (steps.py holds the values between)."""
 
 
 def _trips():
@@ -75,7 +77,7 @@ def test_predict_uses_the_same_steps_without_the_calibration(model):
         seen = _stage_calls(lambda: model.predict(trips))
         point = model.predict(trips)
         interval = model.predict_interval(trips, 0.9)
-    assert seen == ["physics_stage", "domain", "residual", "physical"], seen
+    assert seen == ["components", "physics_stage", "domain", "residual", "physical"], seen
     # one path: the point prediction is the interval's centre, the physics the same
     np.testing.assert_allclose(point["energy_kwh_pred"], interval["energy_kwh_pred"],
                                rtol=1e-12)
@@ -138,3 +140,24 @@ def test_unknown_kind_is_refused(model):
 def test_learning_modules_are_about_400_lines():
     sizes = {p.name: len(p.read_text().splitlines()) for p in (PKG / "learning").glob("*.py")}
     assert max(sizes.values()) <= 420, sorted(sizes.items(), key=lambda kv: -kv[1])[:3]
+
+
+def test_another_battery_capacity_after_loading_changes_the_soc_only():
+    """``model.vehicle`` replaced on a loaded model (``hybridev range --capacity-kwh``):
+    the energies stay, the SoC columns follow the new capacity."""
+    import dataclasses
+
+    m = HybridModel.load(FIXTURES / "format2_posterior_cvplus")
+    trips = _trips()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        before = m.predict_interval(trips, 0.9)
+        cap = m.capacity_kwh
+        m.vehicle = dataclasses.replace(m._vehicle(), battery_capacity_kwh=2 * cap)
+        after = m.predict_interval(trips, 0.9)
+    assert m.capacity_kwh == 2 * cap and m.physics_.vehicle().battery_capacity_kwh == cap
+    np.testing.assert_array_equal(after["energy_kwh_pred"], before["energy_kwh_pred"])
+    np.testing.assert_array_equal(after["energy_kwh_hi"], before["energy_kwh_hi"])
+    s0 = trips["soc_initial"].to_numpy()
+    np.testing.assert_allclose(after["soc_final_pred"],
+                               np.clip(s0 - after["energy_kwh_pred"] / (2 * cap), 0, 1))

@@ -292,7 +292,7 @@ def test_planned_trips_pass_the_components_once_in_order(fitted):
         return seen
 
     assert stages(lambda: m.predict_interval(x, 0.9)) == [
-        "physics_stage", "domain", "residual", "predictive", "calibrate", "planned", "ood",
-        "physical"]
-    assert stages(lambda: m.predict(x)) == ["physics_stage", "domain", "residual", "planned",
-                                            "physical"]
+        "components", "physics_stage", "domain", "residual", "predictive", "calibrate",
+        "planned", "ood", "physical"]
+    assert stages(lambda: m.predict(x)) == ["components", "physics_stage", "domain", "residual",
+                                            "planned", "physical"]

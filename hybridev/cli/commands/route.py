@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, help="directory of a saved HybridModel")
     p.add_argument("--soc", type=float, required=True, help="SoC at departure, (0, 1]")
     p.add_argument("--temp", type=float, default=None,
-                   help="ambient temperature, degC, [-50, 60] (default: the route's "
+                   help="ambient temperature, °C, [-50, 60] (default: the route's "
                         "temperature_c column)")
     p.add_argument("--speed-profile", default=None,
                    help="mean speed: a number (km/h, the whole route) or a CSV of from_km, "
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--reserve={args.reserve!r} is outside the allowed range "
                          f"[0, {args.soc:g})")
     if args.temp is not None and not (math.isfinite(args.temp) and -50.0 <= args.temp <= 60.0):
-        raise ValueError(f"--temp={args.temp!r} is outside the allowed range [-50, 60] degC")
+        raise ValueError(f"--temp={args.temp!r} is outside the allowed range [-50, 60] °C")
     if args.plot is not None:
         check_output(args.plot, option="--plot", suffixes=_PLOT_SUFFIXES,
                      inputs=[args.model, args.route])
