@@ -17,8 +17,8 @@ torch at one thread), median of ``--repeats`` after one warm-up:
   (0.1, 0.5, 0.9) -- the target of issue 5: < 1 s;
 * the same rows with the mode unknown (physics marginalised over the three
   profiles, so three traces per anchor);
-* of the first: the physics part (``hybridev.apps.range._range_curve``: physics at
-  four distances per row and one network pass);
+* of the first: the legs (``hybridev.apps.range._drive``: seven legs per row
+  predicted by ``predict`` and ``predict_distribution``);
 * one condition row; ``soc_fan`` for one condition with its default 61
   distances (``--single-repeats`` runs after three warm-ups).
 
@@ -35,7 +35,7 @@ import pandas as pd
 import torch
 
 from hybridev import HybridModel, make_trips
-from hybridev.apps.range import _check_conditions, _range_curve, predict_range
+from hybridev.apps.range import _check_conditions, _drive, _levels, predict_range
 from hybridev.apps.range_plot import soc_fan
 from hybridev.physics.truth import make_dataset
 
@@ -58,14 +58,15 @@ def main(argv=None) -> int:
     s0 = trips["soc_initial"].to_numpy(float)
     unknown = cond.assign(mode=None)
     one = cond.iloc[:1]
-    budget = (s0 - RESERVE) * model.capacity_kwh
     checked = _check_conditions(cond)
 
     t_rows = bench.timed(
         lambda: predict_range(model, cond, soc_initial=s0, soc_reserve=RESERVE), args.repeats)
     t_unk = bench.timed(
         lambda: predict_range(model, unknown, soc_initial=s0, soc_reserve=RESERVE), args.repeats)
-    t_phys = bench.timed(lambda: _range_curve(model, checked, s0, budget, 0), args.repeats)
+    levels = _levels(np.array([0.9, 0.5, 0.1]))
+    t_phys = bench.timed(lambda: _drive(model, checked, s0, np.full_like(s0, RESERVE), 0, levels),
+                         args.repeats)
     t_one = bench.timed(lambda: predict_range(model, one, soc_initial=0.8, soc_reserve=RESERVE),
                         args.single_repeats, warmup=3)
     t_fan = bench.timed(lambda: soc_fan(model, one, soc_initial=0.8), args.single_repeats,
@@ -90,7 +91,7 @@ Conditions: `make_trips({N_ROWS}, seed=1)` without distance, its per-row SoC, re
 | call | time |
 |---|---|
 | `predict_range`, {N_ROWS:,} rows, modes known | {bench.median_iqr(t_rows)} |
-| of which physics (`_range_curve`: 4 anchor distances per row + one network pass) | {bench.median_iqr(t_phys)} |
+| of which the legs (`_drive`: 7 legs per row, `predict` + `predict_distribution`) | {bench.median_iqr(t_phys)} |
 | `predict_range`, {N_ROWS:,} rows, mode unknown (3 traces per anchor) | {bench.median_iqr(t_unk)} |
 | `predict_range`, 1 row | {bench.median_iqr(t_one, 1e3, "ms", 1)} |
 | `soc_fan`, 1 condition, 61 distances | {bench.median_iqr(t_fan, 1e3, "ms", 1)} |

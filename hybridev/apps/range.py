@@ -1,92 +1,63 @@
-"""Range prediction with confidence bands, and the SoC-versus-distance fan chart.
+"""Range prediction with confidence bands: a range query as a drive of consecutive legs.
 
-A trip of length ``r`` under fixed conditions (mean speed, mode, temperature,
-hour, grade) has the predictive energy distribution ``E(r)`` of
-:meth:`hybridev.HybridModel.predict_distribution`. With the energy budget
-``B = (s0 - s_reserve) C`` the range ``R`` satisfies
-``P(R <= r) = P(E(r) >= B)``, so the range reached with probability
-``1 - q``, ``range_km_q``, is the ``r`` at which the ``(1 - q)``-quantile of
-``E(r)`` equals ``B``. :func:`predict_range` solves this on a distance grid,
-vectorised over (conditions x grid):
+With the energy budget ``B = (s0 - s_reserve) C`` the range ``R`` satisfies
+``P(R <= r) = P(E(r) >= B)``, so the range reached with probability ``1 - q``,
+``range_km_q``, is the ``r`` at which the ``(1 - q)``-quantile of the energy
+``E(r)`` of a drive of length ``r`` equals ``B``.
 
-1. **Physics at a few anchor distances per condition, interpolated.** A
-   synthesised trace is a sequence of whole drive cycles, so the physics
-   energy is *roughly* proportional to distance, but not closely enough to
-   scale one reference trip as the issue suggested: with ``n_steps`` samples
-   per trace, long trips get fewer, longer cycles (:mod:`hybridev.physics.kinematics`),
-   and the consumption ``E_p(r) / r`` at the range distance differs from the
-   100 km trip's by 2 % at the median, 13 % at the 95th percentile and 28 %
-   at worst (1,500 conditions, ``evaluation/range_bands/range_bands.md``; the anchors
-   below: 0.0 %, 0.7 %, 3.5 %). Instead a first run at ``B / 0.18 kWh/km``
-   (physics at the posterior median plus the networks' median) gives the
-   consumption ``k``
-   and the centre ``r0 = B / k`` of the search; the physics (posterior median
-   and the per-trip spread of the posterior draws) is then computed at the
-   anchors ``r0 x (0.7, 1, 1.4)``. Consumption, spread per km and maximum
-   speed are interpolated linearly in ``log r`` between these four anchors
-   and held constant outside them. The trace synthesis is not smooth in
-   distance (e.g. a 5 % step in consumption where the cycle count reaches
-   ``n_steps / 8``), so the interpolated physics differs from direct
-   simulation: the energy quantile of ``predict_distribution`` at the
-   predicted range is within about 0.1 % of ``B`` at the median, 1 % at the
-   95th percentile and 5 % at worst (``evaluation/range_bands/range_bands.md``;
-   ``tests/test_range.py`` checks physics interpolation median < 1 %, max < 6 %).
-2. **The residual networks on every (condition, distance) pair**, with the
-   features a trip of that length would have: distance ``r``, speed, the
-   interpolated maximum speed, mode, temperature, hour, ``soc_initial`` (the
-   SoC the range starts from), ``E_p(r)`` and ``E_p(r) / r``.
-3. **The predictive mixture exactly as the model builds it**
-   (:meth:`hybridev.HybridModel.predict_distribution`): physics-posterior
-   spread plus member means plus member noise, as an
-   :class:`~hybridev.learning.predictive.EnergyDistribution` over the flattened
-   (conditions x grid) trips. Its marginal law only needs the mean and
-   variance of the physics draws, which scale with ``r``; they enter as two
-   draws ``mean +- sd`` (same mean and variance, hence the same marginal).
-4. **Solve.** Each quantile curve (with ``r = 0, E = 0`` prepended) is made
-   non-decreasing in ``r`` (``numpy.maximum.accumulate``) and its first
-   crossing of ``B`` is linearly interpolated, on 27 distances from
-   ``r0 / 4`` to ``4 r0`` (ratio 1.075 between 0.45 and 2.2 ``r0``; grid
-   error below 0.3 %) plus one beyond the distance at which the physical
-   energy floor (:mod:`hybridev.learning.physical`) reaches ``B``. Every
-   energy quantile is at least the floor, which grows linearly with
-   distance, so every curve crosses ``B`` and the range is finite (for any
-   vehicle with a non-zero road load); past the training distances the
-   networks see the longest training distance (the residual is held).
+**A drive, not one giant trip** (:mod:`hybridev.apps.drive`). The drive at
+the queried speed and temperature is a sequence of legs of a familiar length
+``L`` (the median training trip, :func:`~hybridev.apps.drive.leg_length_km`),
+each a planned trip that the model predicts from its summary: the first leg
+starts soaked, every later leg follows without a stop (``parked_min = 0``), so
+the warm-up is paid once. ``E(r)`` for ``r <= L`` is the first leg alone
+(interpolated linearly between soaked legs of ``L / 16 ... L``), and beyond it
+one soaked leg plus ``(r - L) / L`` warm legs. Their errors add as the model's
+own distribution says: the physics posterior draw and the ensemble member are
+common to all legs, the members' noise is split into a part common to the legs
+and an independent part by how the fitted noise grows with trip length
+(:func:`~hybridev.apps.drive.leg_correlation`). Every leg lies within the
+training distances, so a long range is no longer out of the domain for its
+length alone, and the networks' residual is that of familiar trips.
+
+Per condition, seven legs are predicted once per conformal level
+(``predict_distribution``: soaked legs of ``L x (1/16, 1/8, 1/4, 1/2, 1)``, a
+warm half leg for the noise correlation, a warm leg), then the drive's energy
+quantiles are computed on 27 distances from ``r0 / 4`` to ``4 r0`` around the
+mean-energy range ``r0``, plus one beyond the distance at which the physical
+energy floor (:mod:`hybridev.learning.physical`) reaches ``B``. Each quantile
+curve is floored there, made non-decreasing in ``r`` and its first crossing of
+``B`` linearly interpolated, so every range is finite. Warm legs are predicted
+at the SoC half way between departure and reserve (the network's
+``soc_initial`` input and the internal-resistance loss).
 
 Conformal calibration: the energy quantile ``p = 1 - q`` is an endpoint of the
-central interval of level ``|1 - 2q|``, so its spread factor is the model's
-conformal :meth:`~hybridev.learning.conformal.NormalizedConformal.spread_factor` at
-that level (0.8 for both ``q10`` and ``q90``, the 80 % band). Levels below
-0.5 use the factor of the 50 % band: the conformal quantile at small levels
-rests on few calibration scores, and the factor scales the spread about the
-centre, so the median barely depends on it.
-
-The bands are only as good as the model at the range distance: the networks
-take distance as an input, and a full battery's range (300-700 km) is beyond
-the paper's 20-200 km training trips. The default relative residual target
-(``HybridModel(residual_target="relative")``) carries over to longer trips
-much better than the paper's absolute one; ``evaluation/range_bands/range_bands.md``
-reports the coverage of the 10-90 % band on a known truth, split by whether
-the true range lies within the training distances.
+central interval of level ``|1 - 2q|``; the legs are predicted at that level
+(``predict_distribution(level=...)``: its conformal factor and any
+out-of-domain widening, folded into each leg's pieces). Quantiles between 0.25
+and 0.75 (the median) use the lowest other level asked for (0.8 by default):
+the factor scales the spread about the centre, so the median barely depends on it.
 
 An unfitted model predicts the physics only (with a
-:class:`~hybridev.learning.model.PhysicsFallbackWarning`): every band collapses to the
-physics range.
+:class:`~hybridev.learning.model.PhysicsFallbackWarning`): every band collapses
+to the physics range. The SoC fan chart is :mod:`hybridev.apps.range_plot`.
 
-Module size (about 490 lines, over the package's 400-line guide): one
-computation, range quantiles on a distance grid, whose steps (the physics curve,
-the residual on the grid, the physical floor and the floor's range, the
-out-of-domain widening, the root solve) share the grid arrays; the plot lives in
-:mod:`hybridev.apps.range_plot`.
+Module size (about 420 lines, over the package's 400-line guide): the input
+checks (shared with :mod:`~hybridev.apps.range_plot` and
+:mod:`~hybridev.apps.route`), the drive's legs and weights, the floor and the
+root solve share the grid arrays; the sum of legs lives in
+:mod:`hybridev.apps.drive`.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+from hybridev.apps.drive import drive_distribution, leg_correlation, leg_length_km, predict_legs
 from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
@@ -96,12 +67,9 @@ from hybridev.learning.model import HybridModel
 from hybridev.learning.physical import (
     FLOOR_MARGIN,
     MAX_DROP_M,
-    distance_hold,
     floor_along,
     floor_per_km,
 )
-from hybridev.learning.pipeline import ood_sd, physics_draws
-from hybridev.learning.predictive import EnergyDistribution
 from hybridev.physics.kinematics import trace_keys
 from hybridev.physics.validation import TRIP_RULES, check_table
 
@@ -111,12 +79,8 @@ __all__ = [
 ]
 
 
-_REF_KWH_PER_KM = 0.18        # centres the first physics run (a typical consumption)
 _MIN_KWH_PER_KM = 0.01        # floor of the consumption used to place the grid
-_KNOTS = np.array([0.7, 1.0, 1.4])
 _GRID = np.concatenate([[0.25, 0.35], np.geomspace(0.45, 2.2, 23), [3.0, 4.0]])
-_MAX_ANCHOR_KM = 1000.0       # anchors stay within the trip tables' 2,000 km
-_MIN_STD_KWH = 1e-9           # numerical floor: a point network without noise head
 _CONDITION_RULES = {k: v for k, v in TRIP_RULES.items()
                     if k not in ("distance_km", "soc_initial")}
 _FORBIDDEN = {"distance_km": "the range is the unknown distance",
@@ -210,125 +174,113 @@ def _check_quantiles(quantiles) -> np.ndarray:
     return q
 
 
-# -- physics along distance ---------------------------------------------------------------
-def _rows(cond: pd.DataFrame, s0: np.ndarray, dist_km: np.ndarray) -> pd.DataFrame:
-    """Trip table with ``dist_km.shape[1]`` rows per condition (same trace key per condition)."""
-    n, k = dist_km.shape
-    keys = trace_keys(cond)  # trip_id, else its speed and grade (as simulate): not its row
-    rows = cond.iloc[np.repeat(np.arange(n), k)].reset_index(drop=True)
-    rows["trip_id"] = np.repeat(keys, k)
-    rows["distance_km"] = dist_km.ravel()
-    rows["soc_initial"] = np.repeat(s0, k)
+# -- the drive: legs and their weights -----------------------------------------------------
+_ANCHORS = np.array([1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0])  # soaked first legs, x L
+_T_SOAKED, _T_HALF, _T_WARM = len(_ANCHORS) - 1, len(_ANCHORS), len(_ANCHORS) + 1
+"""Leg types: the full soaked leg, the warm half leg, the warm leg (after the anchors)."""
+_N_TYPES = len(_ANCHORS) + 2  # soaked anchors, a warm half leg, a warm leg
+
+
+@dataclass(frozen=True)
+class _Drive:
+    """Legs of each condition, predicted once per conformal level."""
+
+    leg_km: float
+    pieces: dict          # level -> LegPieces of the (n * _N_TYPES) legs, condition-major
+    rho: np.ndarray       # (n,) noise correlation between legs
+    physics_kwh: np.ndarray  # (n, _N_TYPES) physics energy of each leg (posterior median)
+    table: pd.DataFrame   # model.predict of the legs
+    base: pd.DataFrame    # the conditions (n rows)
+
+
+def _legs(cond: pd.DataFrame, s0: np.ndarray, s_mid: np.ndarray, leg_km: float
+          ) -> pd.DataFrame:
+    """The leg table: per condition the soaked anchors, a warm half leg and a warm leg."""
+    n = len(cond)
+    rows = cond.iloc[np.repeat(np.arange(n), _N_TYPES)].reset_index(drop=True)
+    rows["trip_id"] = np.repeat(trace_keys(cond), _N_TYPES)
+    frac = np.concatenate([_ANCHORS, [0.5, 1.0]])
+    rows["distance_km"] = np.tile(frac * leg_km, n)
+    warm = np.tile(np.arange(_N_TYPES) >= _T_HALF, n)
+    rows["soc_initial"] = np.where(warm, np.repeat(s_mid, _N_TYPES), np.repeat(s0, _N_TYPES))
+    rows["parked_min"] = np.where(warm, 0.0, np.nan)  # later legs follow without a stop
     return rows
 
 
-def _anchor_physics(model: HybridModel, cond, s0, anchors_km, seed: int):
-    """Physics at anchor distances (n, K): consumption, spread per km, max speed, table."""
-    n, k = anchors_km.shape
-    rows = _rows(cond, s0, anchors_km)
-    if hasattr(model, "net_") and getattr(model, "posterior_", None) is not None:
-        table, draws = physics_draws(model, rows, n_draws=int(model.n_posterior_draws),
-                                     seed=int(seed))
-        sd = draws.std(axis=0)
-    else:
-        table = physics_draws(model, rows)[0]
-        sd = np.zeros(len(table))
-    d = anchors_km.ravel()
-    e = table["energy_kwh_physics"].to_numpy(float)
-    shape = (n, k)
-    return ((e / d).reshape(shape), (sd / d).reshape(shape),
-            table["max_speed_kmh"].to_numpy(float).reshape(shape), table)
+def _levels(probs: np.ndarray) -> np.ndarray:
+    """Conformal level per energy quantile: its central band, the median with the others."""
+    lv = np.abs(1.0 - 2.0 * np.asarray(probs, float))
+    wide = lv[lv > 0.5]
+    return np.where(lv > 0.5, lv, wide.min() if wide.size else 0.5).round(12)
 
 
-def _interp_log(knots: np.ndarray, values: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Per-row linear interpolation in log distance, constant outside the knots.
+def _drive(model: HybridModel, cond: pd.DataFrame, s0, sr, seed: int, levels) -> _Drive:
+    leg_km = leg_length_km(model)
+    legs = _legs(cond, s0, (s0 + sr) / 2.0, leg_km)
+    pieces, table = {}, None
+    for lv in np.unique(levels):
+        pieces[float(lv)], table = predict_legs(model, legs, level=float(lv), seed=seed)
+    any_p = next(iter(pieces.values()))
+    n = len(cond)
+    half = any_p.take(np.arange(n) * _N_TYPES + _T_HALF)
+    full = any_p.take(np.arange(n) * _N_TYPES + _T_WARM)
+    phys = table["energy_kwh_physics"].to_numpy(float).reshape(n, _N_TYPES)
+    return _Drive(leg_km, pieces, leg_correlation(half, full), phys, table,
+                  cond.reset_index(drop=True))
 
-    knots, values (n, K) with knots increasing per row; r (n, G) > 0 -> (n, G).
+
+def _weights(r: np.ndarray, leg_km: float) -> np.ndarray:
+    """Leg weights (n, G, _N_TYPES) of drives of length r (n, G), km.
+
+    Up to one leg: the soaked leg, interpolated linearly between the anchors
+    (and to zero at zero); beyond: one soaked leg plus ``(r - L) / L`` warm legs.
     """
-    lk, lr = np.log(knots), np.log(r)
-    kk = knots.shape[1]
-    if kk == 1:
-        return np.broadcast_to(values, r.shape).copy()
-    j = np.clip((lr[:, :, None] >= lk[:, None, :]).sum(axis=-1) - 1, 0, kk - 2)
-    x0, x1 = np.take_along_axis(lk, j, 1), np.take_along_axis(lk, j + 1, 1)
-    y0, y1 = np.take_along_axis(values, j, 1), np.take_along_axis(values, j + 1, 1)
-    dx = x1 - x0
-    t = np.clip(np.divide(lr - x0, dx, out=np.zeros_like(lr), where=dx > 0), 0.0, 1.0)
-    return y0 + t * (y1 - y0)
+    a = np.concatenate([[0.0], _ANCHORS * leg_km])
+    w = np.zeros((*r.shape, _N_TYPES))
+    rr = np.minimum(r, leg_km)
+    j = np.clip(np.searchsorted(a, rr, side="right") - 1, 0, len(a) - 2)
+    t = (rr - a[j]) / (a[j + 1] - a[j])
+    for k in range(len(_ANCHORS)):  # anchor k is knot k + 1 of a
+        w[..., k] += np.where(j + 1 == k + 1, t, 0.0) + np.where(j == k + 1, 1.0 - t, 0.0)
+    w[..., _T_WARM] = np.maximum(r - leg_km, 0.0) / leg_km
+    return w
 
 
-def _spread_factor(model: HybridModel, level: float) -> float:
-    cp = getattr(model, "conformal_", None)
-    if cp is None:
-        return 1.0
-    f = cp.spread_factor(level)
-    if not np.isfinite(f):
-        raise ValueError(f"quantile level {level!r} (central band) is too extreme for the "
-                         f"model's {cp.n_calibration} calibration trips")
-    return max(f, 1e-6)
-
-
-def _energy_quantiles(model: HybridModel, base: pd.DataFrame, r: np.ndarray, curve,
-                      probs: np.ndarray, *, warn: bool = True
+def _energy_quantiles(model: HybridModel, drive: _Drive, r: np.ndarray, probs: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Energy quantiles (P, n, G) at distances r (n, G) and the physics energy (n, G), kWh."""
-    knots, k_med, k_sd, vmax = curve
-    kpk = _interp_log(knots, k_med, r)
-    e_floor = _floor(model, base, r)
-    e_med = np.maximum(kpk * r, e_floor)
-    if not hasattr(model, "net_"):
-        if warn:
-            warnings.warn(f"{type(model).__name__} is not fitted: the range is the physics "
-                          "prediction only, every band collapses to it; fit the model on "
-                          "measured trips for bands", PhysicsFallbackWarning, stacklevel=3)
-        return np.broadcast_to(e_med, (len(probs), *r.shape)), e_med
+    """Energy quantiles (P, n, G) of drives of length r (n, G), and the physics (n, G), kWh."""
     n, g = r.shape
-    names = model.feature_names_
-    learner = model.learner_
-    x = np.repeat(learner.features(base, getattr(model, "domain_", None))[:, None, :], g,
-                  axis=1)
-    r_held = distance_hold(model, r)  # the networks see the training distances only
-    vary = {"distance_km": r_held, "max_speed_kmh": _interp_log(knots, vmax, r),
-            "energy_kwh_physics": kpk * r_held, "kwh_per_km_physics": kpk}
-    for name, val in vary.items():
-        if name in names:
-            j = names.index(name)
-            x[:, :, j] = (val - model.feature_mean_[j]) / model.feature_std_[j]
-    factor = (np.ones_like(r) if model.residual_target == "relative" and model._residual
-              else r / r_held)  # absolute residual: held per km
-    if getattr(model, "domain_", None) is not None:  # as learner.features: no extrapolation
-        x = model.domain_.clip_features(x)
-    mean, var = learner.moments(
-        x.reshape(n * g, -1), learner.target_scale(e_med.ravel(), r.ravel()) * factor.ravel())
-    std = np.full_like(mean, _MIN_STD_KWH) if var is None else np.sqrt(var)
-    std = np.maximum(std, _MIN_STD_KWH)
-    if model._residual:
-        e_sd = (_interp_log(knots, k_sd, r) * r).ravel()
-        draws = np.stack([e_med.ravel() - e_sd, e_med.ravel() + e_sd])
-    else:  # PureML: no physics part
-        draws = np.zeros((1, n * g))
-    levels = np.maximum(np.abs(1.0 - 2.0 * probs), 0.5)
+    w = _weights(r, drive.leg_km)
+    e_phys = np.einsum("ngt,nt->ng", w, drive.physics_kwh)
+    floor = floor_along(r, *_forces(model, drive.base), model._vehicle())
+    levels = _levels(probs)
     out = np.empty((len(probs), n * g))
-    ood = _ood_ratio(model, base, r, e_med, EnergyDistribution(draws, mean, std))
+    if not hasattr(model, "net_"):  # physics only: every quantile is the physics
+        out[:] = e_phys.ravel()
+        levels = levels[:0]
     for lv in np.unique(levels):
         sel = levels == lv
-        f = _spread_factor(model, lv)
-        dist = EnergyDistribution(draws, mean, std, spread_factor=np.maximum(f, ood))
+        dist = drive_distribution(drive.pieces[float(lv)], w, drive.rho)
         out[sel] = dist.quantile(probs[sel])
-    floor = e_floor.ravel()  # as predict_interval: never below the physical floor
-    return np.maximum(out, floor).reshape(len(probs), n, g), e_med
+    return np.maximum(out.reshape(len(probs), n, g), floor), np.maximum(e_phys, floor)
 
 
+def _centre_km(drive: _Drive, budget: np.ndarray) -> np.ndarray:
+    """A first guess of the median range (n,): where the mean drive energy meets the budget."""
+    p = next(iter(drive.pieces.values()))
+    n = len(budget)
+    mean = p.mean().reshape(n, _N_TYPES)
+    e1 = np.maximum(mean[:, _T_SOAKED], _MIN_KWH_PER_KM * drive.leg_km)
+    k = np.maximum(mean[:, _T_WARM] / drive.leg_km, _MIN_KWH_PER_KM)
+    return np.where(budget <= e1, drive.leg_km * budget / e1,
+                    drive.leg_km + (budget - e1) / k)
+
+
+# -- floor and root solve -----------------------------------------------------------------
 def _forces(model: HybridModel, base: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     grade = (base["grade_pct"].fillna(0.0).to_numpy(float) if "grade_pct" in base.columns
              else np.zeros(len(base)))
     return floor_per_km(base["avg_speed_kmh"].to_numpy(float), model._vehicle(), grade)
-
-
-def _floor(model: HybridModel, base: pd.DataFrame, r: np.ndarray) -> np.ndarray:
-    """Physical energy floor (n, G) at distances r (:mod:`hybridev.learning.physical`), kWh."""
-    flat, grade = _forces(model, base)
-    return floor_along(r, flat, grade, model._vehicle())
 
 
 def _floor_distance_km(model: HybridModel, base: pd.DataFrame, budget: np.ndarray
@@ -354,27 +306,6 @@ def _distance_grid(model: HybridModel, base: pd.DataFrame, r0: np.ndarray,
     return np.concatenate([r, far[:, None]], axis=1)
 
 
-def _ood_ratio(model, base: pd.DataFrame, r: np.ndarray, e_med: np.ndarray,
-               dist: EnergyDistribution) -> np.ndarray:
-    """Per-cell spread multiplier of out-of-domain (trip, distance) cells, (n * G,).
-
-    As :meth:`HybridModel.predict_distribution`: the out-of-domain spread over
-    the raw spread; 0 in the domain (the conformal factor applies there).
-    """
-    n, g = r.shape
-    if getattr(model, "domain_", None) is None:
-        return np.zeros(n * g)
-    # The search grid may run past the trip table's distance limit (the floor's range):
-    # such cells are scored at the limit, far outside any training domain either way.
-    d_max = TRIP_RULES["distance_km"].hi
-    rep = base.iloc[np.repeat(np.arange(n), g)].reset_index(drop=True).assign(
-        distance_km=np.minimum(r.ravel(), d_max), energy_kwh_physics=e_med.ravel())
-    sd = np.maximum(dist.std(), 1e-12)
-    _, ok, sd_ood = ood_sd(model, rep, dist.mean(), sd, dist.physics_draws_kwh.var(axis=0),
-                           dist=dist)
-    return np.where(ok, 0.0, sd_ood / sd)
-
-
 def _solve(r: np.ndarray, energy: np.ndarray, budget: np.ndarray) -> np.ndarray:
     """First r where the non-decreasing envelope of energy (..., n, G) reaches budget (n,)."""
     lead = energy.shape[:-2]
@@ -392,27 +323,6 @@ def _solve(r: np.ndarray, energy: np.ndarray, budget: np.ndarray) -> np.ndarray:
     return np.where(hit.any(axis=-1), out, np.inf)
 
 
-def _range_curve(model, cond, s0, budget, seed):
-    """Anchor physics around each condition's predicted median range.
-
-    A first physics run at ``B / 0.18 kWh/km`` with the networks' median gives
-    the consumption ``k`` and ``r0 = B / k``; the anchors are ``r0 x
-    (0.7, 1, 1.4)`` plus the first run's distance.
-    """
-    r_ref = np.clip(budget / _REF_KWH_PER_KM, 1.0, _MAX_ANCHOR_KM)[:, None]
-    *ref, table = _anchor_physics(model, cond, s0, r_ref, seed)
-    base = table.reset_index(drop=True)
-    e_ref = _energy_quantiles(model, base, r_ref, (r_ref, *ref), np.array([0.5]), warn=False)[0]
-    r0 = budget / np.maximum(e_ref[0, :, 0] / r_ref[:, 0], _MIN_KWH_PER_KM)
-    knots = np.clip(r0, 1.0, _MAX_ANCHOR_KM)[:, None] * _KNOTS[None, :]
-    *phys, _ = _anchor_physics(model, cond, s0, knots, seed)
-    knots = np.concatenate([knots, r_ref], axis=1)
-    order = np.argsort(knots, axis=1, kind="stable")
-    curve = tuple(np.take_along_axis(np.concatenate([a, b], axis=1), order, 1)
-                  for a, b in zip([knots[:, :-1], *phys], [r_ref, *ref], strict=True))
-    return r0, curve, base
-
-
 # -- public API ---------------------------------------------------------------------------
 def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
                   soc_reserve=0.0, quantiles=(0.1, 0.5, 0.9), seed: int = 0) -> pd.DataFrame:
@@ -426,7 +336,7 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     conditions : pandas.DataFrame, (n_rows, ...), or dask.dataframe.DataFrame
         (a lazy dask DataFrame comes back, :mod:`hybridev.fleet.range`;
         ``soc_initial`` and ``soc_reserve`` must then be scalars)
-        ``avg_speed_kmh`` (km/h), ``temperature_c`` (degC), optional ``mode``
+        ``avg_speed_kmh`` (km/h), ``temperature_c`` (°C), optional ``mode``
         (may be missing or ``None``), ``hour`` (h), ``grade_pct`` (%) and
         ``trip_id`` (key of the synthesised trace). A ``distance_km`` or
         ``soc_initial`` column is an error (the distance is the unknown; the
@@ -450,7 +360,11 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
         model alone at its posterior median) and one column per quantile named
         by :func:`quantile_column` (``range_km_q10``, ``range_km_q50``,
         ``range_km_q90`` by default), km; finite (bounded by the distance at
-        which the physical energy floor uses the budget).
+        which the physical energy floor uses the budget); ``leg_km`` (the
+        drive's leg length, km) and ``leg_noise_correlation`` (``rho`` of
+        :func:`~hybridev.apps.drive.leg_correlation`); from a fitted model
+        ``in_domain`` and ``domain_score`` of the drive's full-length legs
+        (soaked and warm; :mod:`hybridev.learning.domain`).
 
     Examples
     --------
@@ -460,10 +374,12 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     ...     warnings.simplefilter("ignore")
     ...     out = predict_range(HybridModel(n_steps=200), c, soc_initial=0.8, soc_reserve=0.1)
     >>> round(float(out.range_km_q50[0]))  # unfitted: physics only, every band equal
-    296
-    >>> from hybridev import simulate      # a trip that long uses the budget, 0.7 x 75 kWh
-    >>> trip = c.assign(distance_km=out.range_km_q50, soc_initial=0.8)
-    >>> round(float(simulate(trip, n_steps=200).energy_kwh_physics[0]), 2)
+    279
+    >>> from hybridev import simulate  # one soaked leg, then warm legs at the mid SoC
+    >>> leg = float(out.leg_km[0])     # 50 km without training trips
+    >>> legs = pd.concat([c.assign(soc_initial=0.8), c.assign(soc_initial=0.45, parked_min=0.0)])
+    >>> e = simulate(legs.assign(distance_km=leg), n_steps=200).energy_kwh_physics.to_numpy()
+    >>> round(float(e[0] + (out.range_km_q50[0] - leg) / leg * e[1]), 1)  # 0.7 x 75 kWh
     52.5
     """
     if (backend := lazy_backend(conditions)) is not None:  # dask: hybridev.fleet.range
@@ -476,9 +392,20 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     q = _check_quantiles(quantiles)
     s0, sr = _check_soc(soc_initial, soc_reserve, len(cond))
     budget = (s0 - sr) * model.capacity_kwh
-    r0, curve, base = _range_curve(model, cond, s0, budget, seed)
-    r = _distance_grid(model, base, r0, budget)
-    energy, e_phys = _energy_quantiles(model, base, r, curve, 1.0 - q)
+    probs = 1.0 - q
+    if not hasattr(model, "net_"):
+        warnings.warn(f"{type(model).__name__} is not fitted: the range is the physics "
+                      "prediction only, every band collapses to it; fit the model on "
+                      "measured trips for bands", PhysicsFallbackWarning, stacklevel=2)
+    try:
+        drive = _drive(model, cond, s0, sr, seed, _levels(probs))
+    except ValueError as err:
+        if "too high for the" not in str(err):
+            raise
+        raise ValueError(f"quantiles={tuple(float(x) for x in q)!r}: their central band "
+                         f"is {err}") from None
+    r = _distance_grid(model, drive.base, _centre_km(drive, budget), budget)
+    energy, e_phys = _energy_quantiles(model, drive, r, probs)
     ranges = _solve(r, energy, budget)
     out = cond.copy()
     out["soc_initial"] = s0
@@ -487,15 +414,15 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     out["range_km_physics"] = _solve(r, e_phys, budget)
     for qi, rq in zip(q, ranges, strict=True):
         out[quantile_column("range_km", qi)] = rq
-    if getattr(model, "domain_", None) is not None:  # conditions at the median range
-        mid = ranges[len(ranges) // 2]
-        at = base.assign(distance_km=mid)
-        score, ok = model.domain_.score(at)
-        out["in_domain"], out["domain_score"] = ok, score
-        if (~ok).any():
-            warn_out_of_domain(int((~ok).sum()), len(ok), stacklevel=3,
-                               reasons=model.domain_.reasons(at),
-                               what="range condition(s) (at the median range)")
+    out["leg_km"] = drive.leg_km
+    out["leg_noise_correlation"] = drive.rho
+    if "in_domain" in drive.table.columns:  # the drive's legs (all within training distances)
+        ok = drive.table["in_domain"].to_numpy(bool).reshape(len(cond), -1)
+        score = drive.table["domain_score"].to_numpy(float).reshape(len(cond), -1)
+        out["in_domain"] = ok[:, [_T_SOAKED, _T_WARM]].all(axis=1)
+        out["domain_score"] = score[:, [_T_SOAKED, _T_WARM]].max(axis=1)
+        n_out = int((~out["in_domain"]).sum())
+        if n_out:
+            warn_out_of_domain(n_out, len(out), stacklevel=3,
+                               what="range condition(s) (their legs)")
     return out
-
-

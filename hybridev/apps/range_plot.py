@@ -7,14 +7,13 @@ import numpy as np
 import pandas as pd
 
 from hybridev.apps.range import (
-    _MAX_ANCHOR_KM,
-    _anchor_physics,
     _check_conditions,
     _check_model,
     _check_soc,
     _distance_grid,
+    _drive,
     _energy_quantiles,
-    _range_curve,
+    _levels,
     _solve,
     quantile_column,
 )
@@ -27,23 +26,21 @@ __all__ = ["FAN_QUANTILES", "plot_soc_fan", "soc_fan"]
 FAN_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 """SoC quantiles of :func:`soc_fan`: the median with the 50 % and 90 % bands."""
 
-
-_FAN_KNOT_RATIO = np.sqrt(2.0)
+_MAX_FAN_KM = 4000.0  # default span's cap: twice the trip tables' 2,000 km
 
 
 def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=None,
             seed: int = 0) -> pd.DataFrame:
     """Quantiles of the SoC left after driving each distance under one condition.
 
-    The SoC after ``r`` km is ``s0 - E(r) / C`` clipped to [0, 1] (a long
-    descent cannot charge a full battery) with ``E(r)`` the predictive energy
-    of a trip of length ``r`` (built as in :func:`predict_range`, with anchors
-    every factor ``sqrt(2)`` in distance over the plotted span, at most
-    2,000 km), so its ``p``-quantile is ``s0 - Q_{1-p}(E(r)) / C``, clipped.
-    As :func:`predict_range`, it uses the non-decreasing envelope of each
-    energy quantile along distance, so the SoC never climbs with distance,
-    and energy is never below the physical floor
-    (:mod:`hybridev.learning.physical`).
+    The SoC after ``r`` km is ``s0 - E(r) / C`` clipped to [0, 1] with
+    ``E(r)`` the predictive energy of a drive of length ``r``, built of legs
+    exactly as in :func:`~hybridev.apps.range.predict_range` (reserve 0), so
+    its ``p``-quantile is ``s0 - Q_{1-p}(E(r)) / C``, clipped. As
+    :func:`~hybridev.apps.range.predict_range`, it uses the non-decreasing
+    envelope of each energy quantile along distance (from 0 at distance 0), so
+    the SoC never climbs with distance, and energy is never below the physical
+    floor (:mod:`hybridev.learning.physical`).
 
     Parameters
     ----------
@@ -74,7 +71,7 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
     ...     fan = soc_fan(HybridModel(n_steps=200), {"avg_speed_kmh": 90.0, "mode": "eco",
     ...                   "temperature_c": 20.0}, soc_initial=0.8, distances_km=[0, 100])
     >>> fan.round(2).values.tolist()
-    [[0.0, 0.8, 0.8, 0.8, 0.8, 0.8], [100.0, 0.63, 0.63, 0.63, 0.63, 0.63]]
+    [[0.0, 0.8, 0.8, 0.8, 0.8, 0.8], [100.0, 0.64, 0.64, 0.64, 0.64, 0.64]]
     """
     model = _check_model(model)
     check_seed(seed)
@@ -88,13 +85,14 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
     s0, _ = _check_soc(soc_initial, 0.0, 1)
     cap = model.capacity_kwh
     probs = 1.0 - np.asarray(FAN_QUANTILES)
+    budget = s0 * cap
+    drive = _drive(model, cond, s0, np.zeros(1), seed, _levels(probs))
     if distances_km is None:
-        budget = s0 * cap
-        r0, curve, base = _range_curve(model, cond, s0, budget, seed)
-        r = _distance_grid(model, base, r0, budget)
-        far = _solve(r, _energy_quantiles(model, base, r, curve, probs[-1:], warn=False)[0],
-                     budget)[0, 0]
-        d_max = 1.1 * far if np.isfinite(far) else 2.0 * _MAX_ANCHOR_KM
+        from hybridev.apps.range import _centre_km
+
+        r = _distance_grid(model, drive.base, _centre_km(drive, budget), budget)
+        far = _solve(r, _energy_quantiles(model, drive, r, probs[-1:])[0], budget)[0, 0]
+        d_max = 1.1 * far if np.isfinite(far) else _MAX_FAN_KM
         dist = np.linspace(0.0, d_max, 61)
     else:
         try:
@@ -105,24 +103,13 @@ def soc_fan(model: HybridModel, condition, *, soc_initial: float, distances_km=N
             raise ValueError(f"distances_km={distances_km!r} must be a non-empty 1-D array of "
                              "finite distances >= 0 km")
     out = pd.DataFrame({"distance_km": dist})
-    pos = dist > 0
-    soc = np.broadcast_to(s0, (len(probs), dist.size)).copy()
-    if pos.any():
-        hi = min(float(dist.max()), 2.0 * _MAX_ANCHOR_KM)
-        lo = min(max(float(dist[pos].min()), hi / 32.0), hi)
-        n_knots = max(int(np.ceil(np.log(hi / lo) / np.log(_FAN_KNOT_RATIO))) + 1, 2)
-        knots = np.geomspace(lo, hi, n_knots)[None, :] if hi > lo else np.array([[hi]])
-        k_med, k_sd, vmax, table = _anchor_physics(model, cond, s0, knots, seed)
-        base = table.iloc[:1].reset_index(drop=True)
-        d_pos = dist[pos]
-        order = np.argsort(d_pos, kind="stable")
-        energy, _ = _energy_quantiles(model, base, d_pos[order][None, :],
-                                      (knots, k_med, k_sd, vmax), probs)
-        # energy never falls as the distance grows (the SoC never climbs on the way)
-        e = np.maximum.accumulate(energy[:, 0, :], axis=-1)
-        e_sorted = np.empty_like(e)
-        e_sorted[:, order] = e
-        soc[:, pos] = np.clip(s0 - e_sorted / cap, 0.0, 1.0)
+    order = np.argsort(dist, kind="stable")
+    energy, _ = _energy_quantiles(model, drive, dist[order][None, :], probs)
+    # energy never falls as the distance grows (the SoC never climbs on the way)
+    e = np.where(dist[order][None, :] > 0, energy[:, 0, :], 0.0)
+    e = np.maximum.accumulate(e, axis=-1)
+    soc = np.empty_like(e)
+    soc[:, order] = np.clip(s0 - e / cap, 0.0, 1.0)
     for p, col in zip(FAN_QUANTILES, soc, strict=True):
         out[quantile_column("soc", p)] = col
     return out

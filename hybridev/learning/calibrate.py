@@ -144,8 +144,9 @@ class Calibrator:
             lo = np.where(ok, lo, mu - q * sd)
             hi = np.where(ok, hi, mu + q * sd)
             lo_one = np.where(ok, lo_one, lo_split)
+        q_one = float(-np.asarray(cp.lower_bound(0.0, 1.0, level))) if calibrated else None
         return CalibratedInterval(mean=mu, std=sd, lo=lo, hi=hi, lo_one=lo_one,
-                                  spread_factor=1.0, quantile=q)
+                                  spread_factor=1.0, quantile=q, quantile_one=q_one)
 
     # -- persistence -------------------------------------------------------------------
     def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:

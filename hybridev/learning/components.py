@@ -20,14 +20,18 @@ from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_calibration_level
 from hybridev.learning.params import feature_names
 from hybridev.learning.physics_stage import PhysicsStage
+from hybridev.learning.planned import PlannedTripCalibrator
 from hybridev.learning.residual import ResidualLearner
+from hybridev.learning.shift import GapRate
 from hybridev.physics.params import VehicleParams
 
 __all__ = ["NAMES", "Part", "check_level", "new_learner", "new_physics", "physics_of",
            "require_fitted", "require_probabilistic", "restore"]
 
-NAMES = ("physics", "learner", "domain", "calibrator", "gate")
-"""The components, in the order a fit makes them (attributes ``physics_``, ...)."""
+NAMES = ("physics", "learner", "domain", "calibrator", "gate", "planned", "gap_rate")
+"""The components, in the order a fit makes them (attributes ``physics_``, ...); a model
+fitted without logged traces (or saved before them) has no ``planned``, one without a
+conformal step no ``gap_rate``, one saved before the gate no ``gate`` (weight 1)."""
 
 _PAPER_VEHICLE = VehicleParams()  # frozen: safe to share
 _NET_SETTINGS = ("n_members", "hidden", "dropout", "heteroscedastic", "max_epochs", "patience",
@@ -103,6 +107,9 @@ def restore(model, parts: dict, fit_info: dict) -> None:
     model.calibrator_ = Calibrator(mondrian=model.mondrian).set_arrays(
         *parts["calibrator"], learner=learner, posterior=physics.posterior_)
     model.physics_, model.learner_, model.fit_info_ = physics, learner, fit_info
+    planned, rate = parts.get("planned", ({}, {}))[1], parts.get("gap_rate", ({}, {}))[1]
+    model.planned_ = PlannedTripCalibrator.from_arrays(planned) if planned else None
+    model.gap_rate_ = GapRate.from_arrays(rate) if rate else None
 
 
 def require_fitted(model) -> None:

@@ -17,20 +17,35 @@ quantity                  from                          tolerance ``tol_f``
 A new trip's gap in each quantity is the distance to the *nearest* training
 value, in units of the tolerance (beyond the training range, in units of a
 third of it, :data:`EDGE_FRACTION`: extrapolation is riskier); its ``domain_score`` is the largest gap over
-the quantities, so both a value outside the training range and one inside a
+the *intensive* quantities (:data:`INTENSIVE_QUANTITIES`: temperature, speed,
+grade), so both a value outside the training range and one inside a
 wide gap of it count (the paper's synthetic design has only -5, 20 and 32 degC:
 a trip at 3 degC is 8 degC from any training trip, score 2.7). A trip is
 ``in_domain`` when its score is at most 1. The tolerances are physical scales
 (a few degC of cabin/battery climate, a speed band, half again the distance),
 the same for every car.
 
+Intensive and extensive conditions. Energy adds up over distance: a trip of
+familiar speed, temperature and grade but longer (or shorter) than any
+training trip is a sum of familiar stretches, and the physics carries it
+(the networks' residual is held at the training distances,
+:mod:`hybridev.learning.physical`). So only the intensive quantities
+(temperature, speed, grade) score the domain; the extensive ones (distance,
+duration) are still recorded and their gaps returned by :meth:`TrainingDomain.gaps`,
+but they neither flag a trip nor widen it. (Stop density is not among the
+quantities: a trip summary does not carry it.)
+
 Inputs the model was trained with but a trip lacks also leave the domain
 (score at least :data:`MISSING_INPUT_SCORE`): a driving ``mode`` when every
-training trip had one, a logged trace when most training trips had one.
+training trip had one, a logged trace when most training trips had one, unless the model
+calibrated trips predicted without their trace (:mod:`hybridev.learning.planned`,
+:func:`hybridev.learning.fitting.fit_planned`: the domain is then recorded with
+``needs_trace=False``, and a planned trip is in the domain when its conditions are).
 
 Out-of-domain trips get intervals from the physics posterior predictive plus
-an inflation that grows with the score (see :mod:`hybridev.learning.ood` and
-:data:`OOD_INFLATION_PER_UNIT`), and
+an inflation that grows with the score (see :mod:`hybridev.learning.ood`; its
+rate is learned at fit from out-of-fold trips outside their fold's domain,
+:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`), and
 the network inputs of every trip are clipped to their training range
 (:meth:`TrainingDomain.clip_features`), so that the residual does not
 extrapolate: outside the training distances it keeps its boundary value.
@@ -50,6 +65,8 @@ __all__ = [
     "DOMAIN_QUANTITIES",
     "DOMAIN_TOLERANCES",
     "EDGE_FRACTION",
+    "INTENSIVE",
+    "INTENSIVE_QUANTITIES",
     "MISSING_INPUT_SCORE",
     "OOD_INFLATION_PER_UNIT",
     "TrainingDomain",
@@ -65,6 +82,13 @@ DOMAIN_TOLERANCES = (3.0, 8.0, float(np.log(1.5)), float(np.log(1.5)), 1.0)
 """Gap (in the quantity's unit) that makes a trip leave the domain, per quantity."""
 
 _REASON_NAMES = ("temperature", "speed", "distance", "duration", "grade")
+
+INTENSIVE_QUANTITIES = ("temperature_c", "avg_speed_kmh", "grade_pct")
+"""The quantities that score the domain: conditions, not amounts (see the module
+docstring); ``log_distance`` and ``log_duration`` are extensive."""
+
+INTENSIVE = np.array([q in INTENSIVE_QUANTITIES for q in DOMAIN_QUANTITIES])
+"""Mask over :data:`DOMAIN_QUANTITIES` of the intensive quantities, shape (5,)."""
 
 EDGE_FRACTION = 1.0 / 3.0
 """Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 degC, ...):
@@ -175,6 +199,19 @@ class TrainingDomain:
         """Distance to the nearest training value over the tolerance, (n_trips, 5)."""
         return self._gaps(domain_quantities(table, traces)[0])
 
+    def gap(self, table: pd.DataFrame, traces=None) -> np.ndarray:
+        """Largest gap over the intensive quantities, shape (n_trips,) (0 with no trips).
+
+        Examples
+        --------
+        >>> d = TrainingDomain.fit(pd.DataFrame({"distance_km": [10.0, 20.0],
+        ...     "avg_speed_kmh": [50.0, 60.0], "temperature_c": [20.0, 22.0]}), np.zeros((2, 1)))
+        >>> d.gap(pd.DataFrame({"distance_km": [400.0, 15.0], "avg_speed_kmh": [55.0, 55.0],
+        ...     "temperature_c": [21.0, 14.0]})).round(2).tolist()
+        [0.62, 6.0]
+        """
+        return _intensive_max(self.gaps(table, traces))
+
     def _gaps(self, q: np.ndarray) -> np.ndarray:
         """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5)."""
         out = np.empty_like(q)
@@ -220,7 +257,7 @@ class TrainingDomain:
         if len(table):
             g = self.gaps(table, traces) > 1.0
             for j, name in enumerate(_REASON_NAMES):
-                if g[:, j].any():
+                if INTENSIVE[j] and g[:, j].any():
                     out[name] = int(g[:, j].sum())
         for name, lacking in self._missing(table, traces).items():
             if lacking.any():
@@ -230,11 +267,11 @@ class TrainingDomain:
     def score(self, table: pd.DataFrame, traces=None) -> tuple[np.ndarray, np.ndarray]:
         """``(domain_score, in_domain)`` per trip, shapes (n_trips,).
 
-        ``domain_score`` is the largest gap over the quantities (0 on a training
-        value, 1 at the tolerance), at least :data:`MISSING_INPUT_SCORE` for a
+        ``domain_score`` is the largest gap over the intensive quantities (0 on a
+        training value, 1 at the tolerance), at least :data:`MISSING_INPUT_SCORE` for a
         trip lacking a trained-with input; ``in_domain`` is ``score <= 1``.
         """
-        s = self.gaps(table, traces).max(axis=1) if len(table) else np.zeros(0)
+        s = self.gap(table, traces)
         s = np.where(self.missing_inputs(table, traces), np.maximum(s, MISSING_INPUT_SCORE), s)
         return s, s <= 1.0
 
@@ -261,7 +298,7 @@ class TrainingDomain:
             q, has_trace = domain_quantities(table, traces)
             mode = table["mode"].to_numpy(dtype=object) if "mode" in table.columns else None
         g = self._gaps(q) if n else np.zeros((0, len(DOMAIN_QUANTITIES)))
-        gap = g.max(axis=1) if n else np.zeros(0)
+        gap = _intensive_max(g)  # intensive conditions only (the module docstring)
         no_mode = ((pd.isna(mode) if mode is not None else np.ones(n, dtype=bool))
                    if self.needs_mode else np.zeros(n, dtype=bool))
         no_trace = ~has_trace if self.needs_trace else np.zeros(n, dtype=bool)
@@ -270,7 +307,7 @@ class TrainingDomain:
         reasons = {}
         if not ok.all():
             for j, name in enumerate(_REASON_NAMES):
-                if (g[:, j] > 1.0).any():
+                if INTENSIVE[j] and (g[:, j] > 1.0).any():
                     reasons[name] = int((g[:, j] > 1.0).sum())
             for name, lacking in (("mode", no_mode), ("logged trace", no_trace)):
                 if lacking.any():
@@ -278,7 +315,7 @@ class TrainingDomain:
             if warn:
                 warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
         out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
-                               no_mode=no_mode, reasons=reasons)
+                               no_mode=no_mode, reasons=reasons, has_trace=has_trace)
         if reasons:  # some trip is out: the gap and inflation of its out-of-domain spread
             out.ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
             out.inflation = self.inflation(out.ood_gap)
@@ -299,7 +336,7 @@ class TrainingDomain:
         grade = columns["grade_pct"] if "grade_pct" in columns else np.zeros(n)
         q = _quantities(columns["temperature_c"], columns["avg_speed_kmh"],
                         columns["distance_km"], grade)
-        s = self._gaps(q).max(axis=1) if n else np.zeros(0)
+        s = _intensive_max(self._gaps(q))
         miss = np.zeros(n, dtype=bool)
         if self.needs_mode:
             miss |= pd.isna(columns["mode"]) if "mode" in columns else np.ones(n, dtype=bool)
@@ -357,6 +394,11 @@ class TrainingDomain:
             raise ValueError(f"training domain: array {exc} is missing") from exc
 
 
+def _intensive_max(gaps: np.ndarray) -> np.ndarray:
+    """Row-wise largest gap over the intensive columns of ``gaps`` (n_trips, 5)."""
+    return gaps[:, INTENSIVE].max(axis=1) if len(gaps) else np.zeros(0)
+
+
 def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3,
                        reasons: dict[str, int] | None = None, what: str = "trip(s)") -> None:
     """Warn (:class:`~hybridev.core.errors.OutOfDomainWarning`) when ``n_out > 0``;
@@ -367,7 +409,7 @@ def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3,
                if reasons else "")
         warnings.warn(
             f"{n_out} of {n_trips} {what} lie outside the conditions the model was trained "
-            "on (temperature, speed, distance, duration, grade, or a missing mode / logged "
-            f"trace it was trained with){why}: see the in_domain and domain_score columns; "
+            "on (temperature, speed, grade, or a missing mode / logged trace it was "
+            f"trained with){why}: see the in_domain and domain_score columns; "
             "their intervals come from the physics posterior predictive, widened",
             OutOfDomainWarning, stacklevel=stacklevel)

@@ -10,6 +10,7 @@ seeds every later random step from the fit seed; :func:`fit_physics`,
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass
@@ -32,10 +33,12 @@ from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode
 from hybridev.learning.pipeline import raw_distributions
+from hybridev.learning.planned import PlannedTripCalibrator, conditions_of
+from hybridev.learning.shift import GapRate, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
 
 __all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
-           "fit_physics", "fit_summary", "split_trips"]
+           "fit_physics", "fit_planned", "fit_summary", "split_trips"]
 
 
 @dataclass(frozen=True)
@@ -197,6 +200,56 @@ def fit_gate(model, gate, good: pd.DataFrame, split: FitSplit, e_meas: np.ndarra
     gate.fit_distributions(e_meas[rows], [dist], good["distance_km"].to_numpy(float)[rows],
                            split.codes[rows], source=source)
     return gate.gated(dist)
+
+
+def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.ndarray,
+                seed: int) -> tuple:
+    """``(planned, gap_rate, domain)`` of a model whose calibrator is fitted
+    (:mod:`hybridev.learning.planned`, :mod:`hybridev.learning.shift`).
+
+    ``planned`` (a :class:`~hybridev.learning.planned.PlannedTripCalibrator`) only when
+    most training trips had a logged trace (``domain_.needs_trace``): the trips the
+    conformal step scored (CV+: every trip by the fold model that did not see its day;
+    split: the held-out trips by the final model) are predicted again *without* their
+    traces, against their measured energy; the domain is then returned with
+    ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
+    whenever there is a conformal step; it pools the scores with traces and (when
+    fitted) without, each against the trip's gap to its fold's training domain. Without
+    a conformal step: ``(None, None, domain)``.
+    """
+    domain = model.domain_
+    cal = model.calibrator_
+    cp = cal.conformal_
+    if cp is None:
+        return None, None, domain
+    cv = cal.folds()
+    if cv:
+        fold, idx = np.asarray(cp.fold, int), np.arange(len(good))
+    else:
+        fold, idx = np.full(len(good), -1), np.asarray(split.cal, int)
+        fold[idx] = 0
+    scores = [cp.residuals]
+    gaps = [fold_gaps(good, fold, traces, score_traces=traces)[idx]]
+    planned = None
+    if traces is not None and domain.needs_trace:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # OutOfDomainWarning of the scored trips
+            if cv:
+                dists = raw_distributions(model, good, None, seed=int(seed), nets=cv,
+                                          physics=cal.fold_physics_ or None)[0]
+                mu = np.stack([d.mean() for d in dists])[fold, idx]
+                sd = np.stack([d.std() for d in dists])[fold, idx]
+            else:
+                dist = raw_distributions(model, good.iloc[idx], None, seed=int(seed))[0][0]
+                mu, sd = dist.mean(), dist.std()
+        g_plan = fold_gaps(good, fold, traces, score_traces=None)[idx]
+        planned = PlannedTripCalibrator().fit(
+            e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
+            conditions=conditions_of(good.iloc[idx]), fold=fold[idx] if cv else None)
+        domain = dataclasses.replace(domain, needs_trace=False)
+        scores.append(planned.residuals_)
+        gaps.append(g_plan)
+    return planned, GapRate().fit(scores, gaps), domain
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,

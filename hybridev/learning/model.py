@@ -32,15 +32,8 @@ from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
 from hybridev.data.logs import MeasuredTrips
+from hybridev.learning import components as comp
 from hybridev.learning import fit_notes, fitting
-from hybridev.learning.components import (
-    NAMES,
-    Part,
-    check_level,
-    physics_of,
-    require_fitted,
-    require_probabilistic,
-)
 from hybridev.learning.features import FEATURE_NAMES
 from hybridev.learning.inputs import _check_range, unpack_trips
 from hybridev.learning.ood import trace_gap
@@ -89,6 +82,10 @@ class HybridModel(RefitGuardMixin, HybridParams):
         ``cv_nets_``, ``cv_physics_``, ``mondrian_cut_km_`` and ``conformal_bins_``.
     gate_ : ResidualGate
         The stacking gate (:mod:`hybridev.learning.gate`; also ``learner_.gate_``).
+    planned_ : PlannedTripCalibrator or None
+        Planned trips' calibration (:mod:`hybridev.learning.planned`; fitted on traces).
+    gap_rate_ : GapRate or None
+        Learned out-of-domain widening rate (:mod:`hybridev.learning.shift`).
     fit_info_ : dict
         Trip counts, seed, fit time, validation-set errors, ``distance_km_range`` (shortest
         and longest fitting trip, km; past them the residual is held,
@@ -117,10 +114,10 @@ class HybridModel(RefitGuardMixin, HybridParams):
 
     # the components' learned state under the model's documented names
     (net_, history_, feature_mean_, feature_std_, target_mean_, target_std_,
-     n_parameters_) = (Part("learner_") for _ in range(7))
-    posterior_, discrepancy_, heater_kind_ = (Part("physics_") for _ in range(3))
+     n_parameters_) = (comp.Part("learner_") for _ in range(7))
+    posterior_, discrepancy_, heater_kind_ = (comp.Part("physics_") for _ in range(3))
     conformal_, cv_nets_, cv_physics_, mondrian_cut_km_, conformal_bins_ = (
-        Part("calibrator_", a) for a in (None, "fold_nets_", "fold_physics_", "cut_km_", "bins_"))
+        comp.Part("calibrator_", a) for a in (None, "fold_nets_", "fold_physics_", "cut_km_", "bins_"))
 
     # -- components ----------------------------------------------------------------------
     @property
@@ -137,12 +134,12 @@ class HybridModel(RefitGuardMixin, HybridParams):
 
     def components(self) -> dict:
         """The fitted components by name: ``physics``, ``learner``, ``domain``, ``calibrator``."""
-        return {k: self.__dict__[f"{k}_"] for k in NAMES
+        return {k: self.__dict__[f"{k}_"] for k in comp.NAMES
                 if self.__dict__.get(f"{k}_") is not None}
 
     def physics_stage(self) -> PhysicsStage:
         """The fitted physics stage (with the current ``vehicle``), or an unfitted one."""
-        return physics_of(self)
+        return comp.physics_of(self)
 
     def _vehicle(self) -> VehicleParams:
         return self.physics_stage().vehicle()
@@ -159,13 +156,13 @@ class HybridModel(RefitGuardMixin, HybridParams):
         return self.fitted()
 
     def _require_fitted(self) -> None:
-        require_fitted(self)
+        comp.require_fitted(self)
 
     def _require_probabilistic(self, what: str) -> None:
-        require_probabilistic(self, what)
+        comp.require_probabilistic(self, what)
 
     def _check_level(self, level) -> None:
-        check_level(self, level)
+        comp.check_level(self, level)
 
     def fit(self, measured_trips: pd.DataFrame | MeasuredTrips, *, seed: int = 0,
             timeseries=None, groups="auto",
@@ -219,9 +216,9 @@ class HybridModel(RefitGuardMixin, HybridParams):
         t0 = time.perf_counter()
         good, traces, table = fitting.fit_inputs(self, measured_trips, timeseries)
         split = fitting.split_trips(self, good, table, groups, seed)
-        for attr in ("physics_", "learner_", "domain_", "calibrator_", "gate_"):
-            self.__dict__.pop(attr, None)
-        # 1. physics: heater kind, posterior, discrepancy (calibration trips held out)
+        for name in comp.NAMES:
+            self.__dict__.pop(f"{name}_", None)
+        # 1. physics: heater kind, posterior and discrepancy (calibration trips held out)
         self.physics_, heater = fitting.fit_physics(self, good, split, traces, seed)
         # 2. residual learner and training domain on the physics of every trip
         self.learner_, self.domain_, (xs, ys, e_meas, e_phys, scale) = fitting.fit_learner(
@@ -232,7 +229,10 @@ class HybridModel(RefitGuardMixin, HybridParams):
         self.calibrator_ = fitting.fit_calibrator(self, good, traces, split, xs, ys, e_meas,
                                                   seed)
         info = self.fit_info_ = fitting.fit_summary(self, good, split, heater, seed,
-                                                    (xs, e_meas, e_phys, scale))  # 4. summary
+                                                    (xs, e_meas, e_phys, scale))
+        # 5. planned trips (no logged trace) and the out-of-domain widening rate
+        self.planned_, self.gap_rate_, self.domain_ = fitting.fit_planned(
+            self, good, traces, split, e_meas, seed)
         if traces is not None and self.domain_.needs_trace:
             info["trace_gap_rel"] = trace_gap(self, good, e_meas, traces)  # learning.ood
         info.update(fit_notes.fit_notes(measured_trips, self.physics_.posterior_))

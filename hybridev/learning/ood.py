@@ -3,8 +3,11 @@
 A trip outside the training domain gets the spread ``sd_ood`` instead of the
 model's own (conformally calibrated) one:
 
-* outside the training ranges or in a gap of them (largest gap ``g > 1``):
-  ``sqrt(var_draws + inflation(g)^2 * rest)``, with
+* outside the training ranges or in a gap of them (largest intensive gap ``g > 1``):
+  ``sqrt(var_draws + inflation(g)^2 * rest)`` (``inflation`` at the rate learned at fit,
+  :class:`~hybridev.learning.shift.GapRate`, when the model has one; with it the
+  interval is also at least ``mu +- q s inflation(g)`` with the trip's own conformal
+  ``q``), with
   ``rest = (noise_rel E_p)^2 + (mu - E_p)^2 + max(sd^2 - var_draws, 0)``: the
   physics posterior predictive (the spread of the posterior draws,
   ``var_draws``, and the posterior's relative noise ``noise_rel``), the
@@ -47,7 +50,7 @@ calibrated interval, and widens the intervals of the trips out of the domain.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -71,10 +74,20 @@ class OutOfDomainSpread:
         The physics posterior's median relative noise (0 without a posterior).
     trace_gap_rel : float
         ``fit_info_["trace_gap_rel"]`` (0 when not fitted on logged traces).
+    rate : GapRate or None
+        The learned widening rate (:class:`~hybridev.learning.shift.GapRate`, the
+        model's ``gap_rate_``); None: the fixed
+        :meth:`~hybridev.learning.domain.TrainingDomain.inflation` of the assessment.
     """
 
     noise_rel: float = 0.0
     trace_gap_rel: float = 0.0
+    rate: object = None
+
+    def inflation(self, gap: np.ndarray, fixed: np.ndarray | None = None) -> np.ndarray:
+        """Width multiplier at ``gap``: the learned rate's, else ``fixed`` (the
+        assessment's fixed-rate inflation)."""
+        return fixed if self.rate is None else self.rate.inflation(gap)
 
     def sd(self, assessment: DomainAssessment | None, table: pd.DataFrame, mu: np.ndarray,
            sd: np.ndarray, var_draws: np.ndarray, *, excess_var=None, dist=None,
@@ -99,7 +112,8 @@ class OutOfDomainSpread:
             excess_var = (dist.excess_var() if dist is not None
                           else np.maximum(sd**2 - var_draws, 0.0))
         rest = (self.noise_rel * e_p) ** 2 + (mu - e_p) ** 2 + excess_var
-        sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + a.inflation**2 * rest), sd)
+        infl = self.inflation(gap, a.inflation)  # learned rate (learning.shift) or fixed
+        sd_ood = np.where(gap > 1.0, np.sqrt(var_draws + infl**2 * rest), sd)
         no_trace = a.no_trace
         if self.trace_gap_rel > 0 and no_trace.any():  # what the missing trace alone can change
             sd_ood[no_trace] = np.sqrt(sd_ood[no_trace] ** 2
@@ -130,6 +144,8 @@ class OutOfDomainSpread:
         mu, sd = cal.mean, cal.std
         ok, sd_ood = self._raw_sd(assessment, raw)
         z2, z1 = float(ndtri(0.5 + level / 2.0)), float(ndtri(level))
+        if self.rate is not None and assessment is not None and cal.quantile is not None:
+            cal = self._rate_widened(assessment, cal)
         lo = np.where(ok, cal.lo, np.minimum(cal.lo, mu - z2 * sd_ood))
         hi = np.where(ok, cal.hi, np.maximum(cal.hi, mu + z2 * sd_ood))
         lo_one = np.where(ok, cal.lo_one, np.minimum(cal.lo_one, mu - z1 * sd_ood))
@@ -137,13 +153,38 @@ class OutOfDomainSpread:
                                   spread_factor=cal.spread_factor, quantile=cal.quantile)
         return wide, np.where(ok, sd, np.maximum(sd, sd_ood))
 
+    def _rate_widened(self, a: DomainAssessment, cal: CalibratedInterval
+                      ) -> CalibratedInterval:
+        """With a learned rate: trips beyond the intensive conditions (``gap > 1``) at
+        least ``mu +- q s inflation(gap)`` with their own conformal ``q`` (and ``q'``)."""
+        n = len(cal.mean)
+        q = np.broadcast_to(np.asarray(cal.quantile, float), (n,))
+        q1 = np.broadcast_to(np.asarray(np.nan if cal.quantile_one is None
+                                        else cal.quantile_one, float), (n,))
+        out = (a.gap > 1.0) & np.isfinite(q)
+        if not out.any():
+            return cal
+        mu, sd = cal.mean[out], cal.std[out]
+        infl = self.rate.inflation(a.gap[out])
+        lo, hi, lo_one = (np.array(v, float, copy=True) for v in (cal.lo, cal.hi, cal.lo_one))
+        lo[out] = np.minimum(lo[out], mu - q[out] * sd * infl)
+        hi[out] = np.maximum(hi[out], mu + q[out] * sd * infl)
+        lo_one[out] = np.minimum(lo_one[out], mu - q1[out] * sd * infl)
+        return replace(cal, lo=lo, hi=hi, lo_one=lo_one)
+
     def spread_factor(self, assessment: DomainAssessment | None, raw: RawPrediction,
-                      factor: float):
+                      factor):
         """Step 6 of ``predict_distribution``: the per-trip spread factor.
 
-        ``factor`` in the domain, at least ``sd_ood / sd`` out of it; a number when
-        every trip has ``factor``.
+        ``factor`` (the calibrators', a number or per trip) times the learned rate's
+        inflation of the intensive gap, in the domain; at least ``sd_ood / sd`` out of
+        it; a number when every trip has the same.
         """
+        if self.rate is not None and assessment is not None:
+            factor = np.broadcast_to(factor, (len(raw.mean),)) * self.rate.inflation(
+                assessment.gap)
+            if len(factor) and np.all(factor == factor[0]):
+                factor = float(factor[0])
         ok, sd_ood = self._raw_sd(assessment, raw)
         sd = np.maximum(raw.std, 1e-12)
         per_trip = np.where(ok, factor, np.maximum(factor, sd_ood / sd))

@@ -9,9 +9,12 @@
     arrays.npz              numpy arrays, ``<component>.<name>``: ``learner.*`` (network
                             weights, scalers, loss curves), ``physics.*`` (posterior
                             draws, discrepancy), ``domain.*``, ``calibrator.*`` (scores,
-                            Mondrian bins, CV+ fold networks and physics); absent when
-                            nothing was fitted (the stacking gate, ``gate``, has a
-                            document only; models without it load with weight 1)
+                            Mondrian bins, CV+ fold networks and physics),
+                            ``planned.*`` (planned-trip scores and mean correction; only
+                            when fitted on logged traces), ``gap_rate.*`` (the learned
+                            out-of-domain widening rate); absent when nothing was fitted
+                            (the stacking gate, ``gate``, has a document only; models
+                            without it load with weight 1)
     _hybridev-manifest.json  the marker of a folder written by hybridev
                             (:mod:`hybridev.core.outputs`): ``kind: "model_dir"``,
                             format name and version, and the SHA-256 of every file
@@ -37,7 +40,9 @@ invalid JSON, another format or format version, a model written by another
 major version of hybridev, a checksum mismatch (corruption, truncation), and
 wrong names or shapes. Models of format versions 1 (no manifest; only the
 array file is checksummed) and 2 (the network and its scalers at the top level, the
-rest under ``extra``) still load and predict the same (``tests/learning/fixtures``).
+rest under ``extra``) still load and predict the same (``tests/learning/fixtures``); a
+model saved without ``planned`` / ``gap_rate`` gets none (the fixed widening rate, and a
+trip without its trace is out of the domain when the model needs one).
 """
 
 from __future__ import annotations
@@ -302,7 +307,7 @@ def save_model(model, path: str | os.PathLike, *, option: str = "path") -> None:
     write_model_dir(path, doc, arrays or None, option=option)
 
 
-COMPONENTS = ("physics", "learner", "domain", "calibrator", "gate")
+COMPONENTS = ("physics", "learner", "domain", "calibrator", "gate", "planned", "gap_rate")
 """Components of a saved model, in the order they are restored."""
 
 
@@ -333,7 +338,7 @@ def _legacy_components(doc: dict, arrays: dict[str, np.ndarray]) -> tuple[dict, 
             out[f"physics.{name}"] = v
         elif name.startswith("conformal_") or re.match(r"cv[0-9]+\.", name):
             out[f"calibrator.{name}"] = v
-        elif name.startswith("domain."):
+        elif name.startswith(("domain.", "planned.", "gap_rate.")):
             out[name] = v
         else:
             out[k] = v

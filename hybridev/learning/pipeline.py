@@ -19,11 +19,17 @@ the next a named value (:mod:`hybridev.learning.steps`)::
 4. :func:`~hybridev.learning.predictive.build_distribution`: the raw
    :class:`~hybridev.learning.predictive.EnergyDistribution`;
 5. :class:`~hybridev.learning.calibrate.Calibrator`: the conformal interval (split, CV+,
-   Mondrian; or the conformal spread factor of a distribution);
-6. :class:`~hybridev.learning.ood.OutOfDomainSpread`: wider intervals off the domain;
+   Mondrian; or the conformal spread factor of a distribution); then, for planned trips
+   (no logged trace) of a model fitted on traces, the
+   :class:`~hybridev.learning.planned.PlannedTripCalibrator` (their mean correction and
+   their own conformal interval; the rows come from the
+   :class:`~hybridev.learning.steps.DomainAssessment`);
+6. :class:`~hybridev.learning.ood.OutOfDomainSpread`: wider intervals off the domain (at
+   the learned rate :class:`~hybridev.learning.shift.GapRate` when the model has one);
 7. :mod:`hybridev.learning.physical`: the physical energy floor and the final SoC.
 
-``predict`` stops after step 4 (the mean, floored, in step 7); ``predict_distribution``
+``predict`` stops after step 4 (the mean, with the planned trips' mean correction,
+floored, in step 7); ``predict_distribution``
 after step 6 (a per-trip spread factor). No step calls back into an earlier one.
 
 **The distribution.** For a trip with features ``x``, posterior draws ``theta_d``
@@ -85,16 +91,19 @@ class _Parts:
     learner: object  # ResidualLearner or None (unfitted)
     domain: object  # TrainingDomain or None
     calibrator: object  # Calibrator or None
+    planned: object  # PlannedTripCalibrator or None (learning.planned)
+    gap_rate: object  # GapRate or None (learning.shift)
     n_draws: int
     distance_range: list | None
     trace_gap_rel: float
 
     def ood(self) -> OutOfDomainSpread:
-        """Step 6's component: the posterior's median relative noise, the trace gap."""
+        """Step 6's component: the posterior's median relative noise, the trace gap, the
+        learned widening rate (when the model has one)."""
         post = self.stage.posterior_
         return OutOfDomainSpread(
             noise_rel=float(np.median(post.noise_rel)) if post is not None else 0.0,
-            trace_gap_rel=self.trace_gap_rel)
+            trace_gap_rel=self.trace_gap_rel, rate=self.gap_rate)
 
     @classmethod
     def of(cls, model) -> _Parts:
@@ -104,7 +113,8 @@ class _Parts:
         info = state.get("fit_info_") or {}
         return cls(stage, stage.vehicle(), state["learner_"] if fitted else None,
                    state.get("domain_") if fitted else None,
-                   state.get("calibrator_"), int(model.n_posterior_draws),
+                   state.get("calibrator_"), state.get("planned_") if fitted else None,
+                   state.get("gap_rate_") if fitted else None, int(model.n_posterior_draws),
                    info.get("distance_km_range"), float(info.get("trace_gap_rel", 0.0)))
 
     def folds(self) -> tuple[list, list]:
@@ -114,6 +124,15 @@ class _Parts:
             return [], []
         nets = list(cal.fold_nets_ or [])
         return nets, list(cal.fold_physics_ or [None] * len(nets))
+
+
+def _planned_rows(parts: _Parts, assessment) -> np.ndarray | None:
+    """Trips (n_trips,) bool that go to the planned-trip calibrator: those without a logged
+    trace (from the assessment) when the model has one; None when there are none."""
+    if parts.planned is None or assessment is None or assessment.has_trace is None:
+        return None
+    rows = ~assessment.has_trace
+    return rows if rows.any() else None
 
 
 def _entries(physics: list) -> tuple[list, list[int]]:
@@ -204,14 +223,19 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
         modes=True, warn=True)
     raw = raw_prediction(draws.tables[0], dists, mode_means)
+    planned = _planned_rows(parts, assessment)  # trips without a logged trace
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
+        if planned is not None:  # 5 (planned trips)
+            raw, factor = parts.planned.spread(raw, factor, level, planned)
         per_trip = parts.ood().spread_factor(assessment, raw, factor)  # 6 out-of-domain
         d = raw.dist
         return EnergyDistribution(d.physics_draws_kwh, d.residual_mean_kwh, d.residual_std_kwh,
                                   spread_factor=per_trip)
     ok = np.ones(len(raw.mean), dtype=bool) if assessment is None else assessment.in_domain
     calibrated = parts.calibrator.calibrate(raw, level, ok)  # 5 calibrator
+    if planned is not None:  # 5 (planned trips)
+        raw, calibrated = parts.planned.calibrate(raw, calibrated, level, planned)
     wide, confidence = parts.ood().widen(assessment, raw, calibrated, level)  # 6 out-of-domain
     score = np.zeros(len(ok)) if assessment is None else assessment.score
     return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
@@ -234,6 +258,8 @@ def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
     if learner is not None:
         energy = learner.point_of_columns(cols, len(e_phys), parts.distance_range,  # 3-4
                                           dom)
+        if (planned := _planned_rows(parts, assessment)) is not None:  # 5 (planned)
+            energy = parts.planned.correct_point(energy, cols, planned)
         out = point_columns(cols, energy, vehicle)  # 7 output
     else:
         out = point_columns(cols, e_phys, vehicle, floor=False)
@@ -278,5 +304,6 @@ def ood_sd(model, table: pd.DataFrame, mu: np.ndarray, sd: np.ndarray, var_draws
         return np.stack([learner.point(physics_draws(model, sub.assign(mode=m), traces)[0],
                                        dom) for m in MODE_NAMES])
 
-    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist, mode_means=mode_means)
+    sd_ood = _Parts.of(model).ood().sd(assessment, table, mu, sd, var_draws, dist=dist,
+                                       mode_means=mode_means)
     return assessment.score, assessment.in_domain, sd_ood

@@ -131,9 +131,14 @@ class DomainAssessment:
         ``domain_score``: the largest gap, at least 2 for a missing trained-with input.
     in_domain : numpy.ndarray of bool, shape (n_trips,)
     gap : numpy.ndarray, shape (n_trips,)
-        Largest gap over the domain quantities (in tolerances), missing inputs aside.
+        Largest gap over the intensive domain quantities (in tolerances), missing inputs
+        aside.
     no_trace, no_mode : numpy.ndarray of bool, shape (n_trips,)
         Trips lacking a logged trace / a mode the model was trained with.
+    has_trace : numpy.ndarray of bool, shape (n_trips,), or None
+        Trips with a logged trace (whatever the model was trained with): the others
+        are planned trips of a model with a planned-trip calibrator
+        (:mod:`hybridev.learning.planned`).
     reasons : dict of str to int
         Trips out of the domain per reason (:meth:`TrainingDomain.reasons`).
     fade, mode_fade : numpy.ndarray or None
@@ -155,6 +160,7 @@ class DomainAssessment:
     mode_fade: np.ndarray | None = None
     ood_gap: np.ndarray | None = None
     inflation: np.ndarray | None = None
+    has_trace: np.ndarray | None = None
 
 
 @dataclass
@@ -208,8 +214,11 @@ class CalibratedInterval:
         One-sided lower bound at the level (for trips that may empty the battery).
     spread_factor : float
         The calibrator's multiplier on the raw spread (1 when uncalibrated).
-    quantile : float or None
-        The conformal quantile ``q`` of the level (None when uncalibrated).
+    quantile : float, numpy.ndarray (n_trips,) or None
+        The conformal quantile ``q`` of the level (None when uncalibrated; per trip when
+        planned trips have their own, :mod:`hybridev.learning.planned`).
+    quantile_one : float, numpy.ndarray (n_trips,) or None
+        The one-sided factor ``q'`` of the normalised lower bound ``mean - q' std``.
     """
 
     mean: np.ndarray
@@ -218,4 +227,5 @@ class CalibratedInterval:
     hi: np.ndarray
     lo_one: np.ndarray
     spread_factor: float = 1.0
-    quantile: float | None = None
+    quantile: float | np.ndarray | None = None
+    quantile_one: float | np.ndarray | None = None

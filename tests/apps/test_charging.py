@@ -547,3 +547,48 @@ def test_plan_after_a_short_stop_predicts_the_warm_cabin_like_predict():
     np.testing.assert_allclose(p.trips["energy_kwh_pred"].to_numpy(), direct, rtol=1e-9)
     assert p.trips["energy_kwh_pred"].iloc[0] == pytest.approx(e_soaked[0], rel=1e-9)
     assert p.trips["energy_kwh_pred"].iloc[1] < e_soaked[1] - 0.01  # warm cabin, less energy
+
+
+def test_range_and_plans_on_a_model_fitted_on_traces_are_planned_trips():
+    """A model fitted on logged traces: a range query and a charging schedule (no traces)
+    are planned trips, in the domain where their conditions are familiar (issue 31)."""
+    from hybridev import (
+        HybridModel,
+        VehicleParams,
+        make_trips,
+        plan_charging,
+        predict_range,
+        trace_energy_kwh,
+    )
+
+    car = VehicleParams.from_coastdown(150.0, 0.45, 0.028, mass_kg=1750.0)
+    rng = np.random.default_rng(5)
+    n = 100
+    t = make_trips(n, seed=5).drop(columns=["mode"])
+    t["temperature_c"] = rng.uniform(5.0, 25.0, n).round(1)
+    t["distance_km"] = rng.uniform(4.0, 30.0, n)
+    t["avg_speed_kmh"] = rng.uniform(20.0, 70.0, n)
+    rows, energy = [], np.empty(n)
+    for i, r in enumerate(t.itertuples()):
+        s = np.arange(round(r.distance_km / r.avg_speed_kmh * 3600) + 1, dtype=float)
+        v = np.maximum(r.avg_speed_kmh * (1.0 + 0.5 * np.sin(2 * np.pi * s / 80.0 + i)), 0.0)
+        v *= r.avg_speed_kmh / v.mean()
+        rows.append(pd.DataFrame({"trip_id": r.trip_id, "t_s": s, "speed_kmh": v}))
+        energy[i] = float(trace_energy_kwh(v / 3.6, 1.0, vehicle=car,
+                                           temperature_c=r.temperature_c))
+    t["energy_kwh"] = energy * (1.0 + 0.03 * rng.standard_normal(n))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(car, n_steps=100, max_epochs=30, n_members=2,
+                        calibrate_physics=False).fit(t, seed=0,
+                                                     timeseries=pd.concat(rows), groups=None)
+    cond = pd.DataFrame({"avg_speed_kmh": [45.0], "temperature_c": [15.0]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", OutOfDomainWarning)
+        out = predict_range(m, cond, soc_initial=0.9, soc_reserve=0.1)
+        sched = pd.DataFrame({"departure": [8.0, 17.0], "distance_km": [15.0, 15.0],
+                              "avg_speed_kmh": [40.0, 40.0], "temperature_c": [12.0, 18.0]})
+        plan = plan_charging(m, sched, soc_now=0.5, tariff=tariff(), charger_kw=7.0,
+                             n_samples=1000, n_eval=1000)
+    assert bool(out["in_domain"].iloc[0]) and np.isfinite(out["range_km_q50"]).all()
+    assert plan.trips["in_domain"].all()

@@ -7,14 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hybridev import HybridModel, PhysicsFallbackWarning, make_trips, simulate
-from hybridev.apps.range import (
-    _anchor_physics,
-    _check_conditions,
-    _interp_log,
-    predict_range,
-    quantile_column,
-)
+from hybridev import HybridModel, PhysicsFallbackWarning, VehicleParams, make_trips, simulate
+from hybridev.apps.drive import calibrated_pieces, drive_distribution
+from hybridev.apps.range import predict_range, quantile_column
 from hybridev.apps.range_plot import FAN_QUANTILES, plot_soc_fan, soc_fan
 from hybridev.cli.main import main
 from hybridev.core.errors import OutOfDomainWarning
@@ -22,9 +17,8 @@ from hybridev.physics.truth import make_dataset
 
 N_STEPS = 200  # coarser traces than the default 1000 keep the fit fast; truth uses the same
 BANDS = ["range_km_q10", "range_km_q50", "range_km_q90"]
-AGREE_MEDIAN, AGREE_MAX = 0.005, 0.05
-"""Tolerance of predict_range against predict_distribution at the predicted range: the
-physics between anchor distances is interpolated, not simulated (module docstring)."""
+AGREE = 0.005
+"""Tolerance of the drive's median energy at range_km_q50 against the budget (grid solve)."""
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +53,8 @@ def test_columns_and_ordered_bands(model, conditions):
     c, s0 = conditions
     out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
     assert list(out.columns) == [*c.columns, "soc_initial", "soc_reserve", "budget_kwh",
-                                 "range_km_physics", *BANDS, "in_domain", "domain_score"]
+                                 "range_km_physics", *BANDS, "leg_km", "leg_noise_correlation",
+                                 "in_domain", "domain_score"]
     np.testing.assert_allclose(out.budget_kwh, (s0 - 0.1) * 75.0)
     r = out[BANDS].to_numpy()
     assert np.isfinite(r).all() and (r > 0).all()
@@ -76,20 +71,56 @@ def test_other_quantiles_are_named_and_ordered(model, conditions):
     assert (np.diff(out[cols].to_numpy(), axis=1) > 0).all()
 
 
-@pytest.mark.parametrize(("col", "energy_q", "level"),
-                         [("range_km_q50", 0.5, 0.5), ("range_km_q10", 0.9, 0.8),
-                          ("range_km_q90", 0.1, 0.8)])
-def test_agrees_with_predict_distribution(model, conditions, col, energy_q, level):
-    # at r = range_km_q the model's (1 - q) energy quantile, with its conformal spread
-    # factor for the band's level, is the budget
+def legs_at(c, s0, s_mid, leg_km):
+    """A soaked leg and a warm leg (no stop before it) of length leg_km per condition."""
+    soaked = c.assign(distance_km=leg_km, soc_initial=s0, parked_min=np.nan)
+    warm = c.assign(distance_km=leg_km, soc_initial=s_mid, parked_min=0.0)
+    return soaked, warm
+
+
+def test_range_is_a_drive_of_legs(model, conditions):
+    # beyond one leg, the drive's median energy at range_km_q50 is the budget: one soaked
+    # leg plus (r - L) / L warm legs, predicted by predict_distribution as planned trips
     c, s0 = conditions
+    c = c.assign(trip_id=np.arange(len(c)))
     out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
-    trips = c.assign(distance_km=out[col], soc_initial=s0)
-    e = model.predict_distribution(trips, level=level).quantile(energy_q)
-    rel = np.abs(e / out.budget_kwh.to_numpy() - 1.0)
-    # out-of-domain rows: range approximates the physics-draw spread of the widening
-    ok = out["in_domain"].to_numpy(bool)
-    assert np.median(rel) < AGREE_MEDIAN and rel[ok].max() < AGREE_MAX
+    leg = float(out["leg_km"].iloc[0])
+    assert leg == pytest.approx(model.mondrian_cut_km_)  # a familiar (median) trip length
+    long = (out["range_km_q50"] > 1.2 * leg).to_numpy()
+    assert long.sum() >= 10
+    soaked, warm = legs_at(c[long], s0[long], (s0[long] + 0.1) / 2, leg)
+    n = int(long.sum())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        dist = model.predict_distribution(pd.concat([soaked, warm], ignore_index=True),
+                                          level=0.8)
+    p = calibrated_pieces(dist)
+    order = np.column_stack([np.arange(n), n + np.arange(n)]).ravel()  # condition-major
+    x = (out["range_km_q50"].to_numpy()[long] - leg) / leg
+    w = np.stack([np.ones(n), x], axis=1)[:, None, :]
+    e = drive_distribution(p.take(order), w, out["leg_noise_correlation"].to_numpy()[long])
+    rel = np.abs(e.quantile(0.5) / out["budget_kwh"].to_numpy()[long] - 1.0)
+    assert rel.max() < AGREE
+
+
+def test_warm_up_is_paid_once():
+    # a car with a cabin and pack warm-up (the continuous climate of from_coastdown), in the
+    # cold: the drive's first leg starts soaked, the later legs follow without a stop, so
+    # the range uses less per km than its soaked first leg (physics only: unfitted model)
+    veh = VehicleParams.from_coastdown(130.0, 0.8, 0.028, 1700.0)
+    m = HybridModel(veh, n_steps=N_STEPS)
+    c = grid(avg_speed_kmh=60.0, temperature_c=[-10.0])
+    with pytest.warns(PhysicsFallbackWarning):
+        out = predict_range(m, c, soc_initial=1.0, soc_reserve=0.1)
+    leg, r = float(out["leg_km"].iloc[0]), float(out["range_km_q50"].iloc[0])
+    soaked, warm = legs_at(c, 1.0, 0.55, leg)
+    e_s = float(simulate(soaked, veh, n_steps=N_STEPS)["energy_kwh_physics"].iloc[0])
+    e_w = float(simulate(warm, veh, n_steps=N_STEPS)["energy_kwh_physics"].iloc[0])
+    assert e_w < 0.97 * e_s  # the warm-up is a visible share of a soaked leg here
+    assert r > 2 * leg
+    budget = float(out["budget_kwh"].iloc[0])
+    assert e_s + (r - leg) / leg * e_w == pytest.approx(budget, rel=0.005)
+    assert budget / r < e_s / leg
 
 
 def test_range_falls_as_reserve_rises(model):
@@ -137,8 +168,8 @@ def test_rows_are_independent_and_seeded(model, conditions):
 
 def test_out_of_domain_warning_points_at_the_caller(model):
     cold = grid(temperature_c=[-40.0])
-    with pytest.warns(OutOfDomainWarning, match=r"1 of 1 range condition\(s\) \(at the "
-                                                r"median range\) lie outside") as rec:
+    with pytest.warns(OutOfDomainWarning, match=r"1 of 1 range condition\(s\) \(their legs\) "
+                                                r"lie outside") as rec:
         predict_range(model, cold, soc_initial=0.9)
     assert any(w.filename == __file__ for w in rec)
 
@@ -153,36 +184,18 @@ def test_unknown_mode_and_missing_hour(model):
     assert np.isfinite(r).all() and (np.diff(r, axis=1) > 0).all()
 
 
-def test_interpolated_physics_matches_direct_simulation():
-    # The physics is simulated at anchors r0 x (0.7, 1, 1.4) and interpolated in log r;
-    # stated tolerance against direct simulation (n_steps=1000, the default): median
-    # relative error < 1 %, largest < 6 % (the trace synthesis jumps where the cycle
-    # count reaches n_steps / 8).
-    m = HybridModel()
-    c = _check_conditions(make_trips(30, seed=11).drop(columns=["distance_km", "soc_initial"]))
-    s0 = np.full(len(c), 0.9)
-    r0 = np.linspace(60.0, 450.0, len(c))
-    knots = r0[:, None] * np.array([0.7, 1.0, 1.4])
-    k_med, _, _, _ = _anchor_physics(m, c, s0, knots, 0)
-    r = r0[:, None] * np.array([0.75, 0.9, 1.1, 1.3])
-    k_int = _interp_log(knots, k_med, r)
-    direct = np.column_stack([
-        simulate(c.assign(distance_km=r[:, j], soc_initial=s0, trip_id=np.arange(len(c))))
-        ["kwh_per_km_physics"].to_numpy() for j in range(r.shape[1])])
-    rel = np.abs(k_int / direct - 1.0)
-    assert np.median(rel) < 0.01 and rel.max() < 0.06
-    np.testing.assert_allclose(_interp_log(knots, k_med, knots), k_med, rtol=1e-12)
-
-
 def test_unfitted_model_gives_the_physics_range_with_a_warning():
     c = grid(temperature_c=[-5.0, 20.0])
     with pytest.warns(PhysicsFallbackWarning, match="not fitted"):
         out = predict_range(HybridModel(n_steps=N_STEPS), c, soc_initial=0.8, soc_reserve=0.1)
     r = out[[*BANDS, "range_km_physics"]].to_numpy()
     assert np.ptp(r, axis=1).max() == 0.0  # degenerate band: all equal the physics
-    e = simulate(c.assign(distance_km=r[:, 0], soc_initial=0.8, trip_id=7),
-                 n_steps=N_STEPS)["energy_kwh_physics"]
-    np.testing.assert_allclose(e, 0.7 * 75.0, rtol=0.05)  # the budget, up to interpolation
+    # one soaked leg plus (r - L) / L warm legs (no stop: parked_min 0) use the budget
+    leg = float(out["leg_km"].iloc[0])
+    soaked, warm = legs_at(c, 0.8, 0.45, leg)
+    e_s = simulate(soaked, n_steps=N_STEPS)["energy_kwh_physics"].to_numpy()
+    e_w = simulate(warm, n_steps=N_STEPS)["energy_kwh_physics"].to_numpy()
+    np.testing.assert_allclose(e_s + (r[:, 0] - leg) / leg * e_w, 0.7 * 75.0, rtol=0.005)
 
 
 def test_point_model_without_spread_is_rejected():
@@ -207,7 +220,7 @@ C1 = pd.DataFrame({"avg_speed_kmh": [90.0], "mode": ["eco"], "temperature_c": [2
     ({"soc_initial": 0.5, "quantiles": (0.9, 0.1)}, r"quantiles=.* strictly increasing"),
     ({"soc_initial": 0.5, "quantiles": (0.0, 0.5)}, r"quantiles=.* allowed range \(0, 1\)"),
     ({"soc_initial": 0.5, "quantiles": ()}, r"quantiles=.* non-empty"),
-    ({"soc_initial": 0.5, "quantiles": (0.999,)}, r"too extreme .* calibration trips"),
+    ({"soc_initial": 0.5, "quantiles": (0.999,)}, r"quantiles=\(0\.999,\).* too high for the .* calibration trips"),
 ])
 def test_bad_arguments_name_field_value_and_range(model, kwargs, match):
     with pytest.raises(ValueError, match=match):

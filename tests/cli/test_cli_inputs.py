@@ -91,7 +91,7 @@ def test_fit_derives_summaries_from_traces(logger, tmp_path, capsys):
                  "--capacity-kwh", "100"]) == 0
     printed = capsys.readouterr().out
     assert "(80.0 kWh)" in printed
-    assert "beyond the longest training trip" in printed  # trained on <= 200 km trips
+    assert "as a drive of legs of" in printed  # legs of the median training trip
 
 
 def test_range_without_model_uses_coastdown(capsys):

@@ -31,11 +31,18 @@ def test_gap_inside_the_range_leaves_the_domain():
     assert np.all(np.diff(s) > 0)
 
 
-def test_distance_speed_and_duration_ranges():
+def test_speed_leaves_the_domain_but_distance_and_duration_do_not():
+    """Distance and duration are extensive: energy adds up over distance, so a longer
+    trip under familiar conditions is a sum of familiar stretches (in the domain); its
+    gaps are still recorded. Speed (intensive) leaves the domain."""
     dom = TrainingDomain.fit(_table([20] * 3, dist=10.0), np.zeros((3, 1)))
-    _s, ok = dom.score(pd.concat([_table([20], dist=11.0), _table([20], dist=30.0),
-                                 _table([20], speed=60.0)], ignore_index=True))
-    assert ok.tolist() == [True, False, False]
+    new = pd.concat([_table([20], dist=11.0), _table([20], dist=30.0),
+                     _table([20], dist=400.0), _table([20], speed=60.0)], ignore_index=True)
+    _s, ok = dom.score(new)
+    assert ok.tolist() == [True, True, True, False]
+    g = dom.gaps(new)
+    assert g[1, 2] > 1.0 and g[2, 3] > 1.0  # distance, duration gaps: recorded, not scored
+    assert dom.reasons(new) == {"speed": 1}
 
 
 def test_missing_trained_with_mode_counts_as_out_of_domain():

@@ -494,34 +494,40 @@ def test_fit_with_logged_traces_runs_the_posterior_on_them(small):
     assert "read_measured_trips" not in str(exc.value)
 
 
-def test_trips_without_their_trace_get_the_learned_trace_gap(small, tmp_path):
-    """A model fitted on logged traces records how far its predictions on synthesised
-    traces are from the measured energies (RMS log ratio over the training trips), and
-    widens the intervals of trips predicted without a trace by it; trips with their
-    trace are unchanged."""
+def test_trips_without_their_trace_are_planned_trips_not_out_of_the_domain(small):
+    """A model fitted on logged traces calibrates trips predicted without one (planned
+    trips, hybridev.learning.planned): they are in the domain when their conditions are,
+    with their own conformal quantile; trips with their trace keep the traced one. A
+    model without that state (saved before it existed) still has the learned trace gap
+    (hybridev.learning.ood.trace_gap): see tests/learning/test_planned.py."""
+    from hybridev.learning.ood import trace_gap
+
     ts = _logged(small, len(small))
     m = HybridModel(n_steps=N_STEPS, max_epochs=2, n_members=2).fit(small, seed=0,
                                                                       timeseries=ts)
-    gap = m.fit_info_["trace_gap_rel"]
+    assert m.planned_ is not None and "trace_gap_rel" not in m.fit_info_
+    trips = small.drop(columns=["energy_kwh"]).head(10)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        mu = m.predict(small.drop(columns=["energy_kwh"]))["energy_kwh_pred"].to_numpy()
-        ratio = small["energy_kwh"].to_numpy() / mu
-        assert gap == pytest.approx(np.sqrt(np.mean(np.log(ratio) ** 2)), rel=1e-9)
-        assert gap > 0.01
-        trips = small.drop(columns=["energy_kwh"]).head(10)
-        wide = m.predict_interval(trips, 0.9)
+        planned = m.predict_interval(trips, 0.9)
         traced = m.predict_interval(trips, 0.9, timeseries=ts)
-        m.fit_info_["trace_gap_rel"] = 0.0
-        narrow = m.predict_interval(trips, 0.9)
-        pd.testing.assert_frame_equal(traced, m.predict_interval(trips, 0.9, timeseries=ts))
-    assert not wide["in_domain"].any() and traced["in_domain"].all()
-    w, n = (x.energy_kwh_hi - x.energy_kwh_lo for x in (wide, narrow))
-    assert (w > n).all()
-    np.testing.assert_allclose(wide.energy_kwh_pred, narrow.energy_kwh_pred)  # spread only
-    m.fit_info_["trace_gap_rel"] = gap
-    m.save(tmp_path / "m")
-    assert HybridModel.load(tmp_path / "m").fit_info_["trace_gap_rel"] == gap
+        mu = m.predict(small.drop(columns=["energy_kwh"]))["energy_kwh_pred"].to_numpy()
+    np.testing.assert_array_equal(planned["in_domain"], traced["in_domain"])
+    ok = planned["in_domain"].to_numpy()
+    assert ok.any()
+    from hybridev.learning.pipeline import raw_distributions
+    from hybridev.learning.planned import conditions_of
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sd = raw_distributions(m, trips)[0][0].std() * m.planned_.correction(
+            conditions_of(trips))  # steps 1-4 and the planned mean correction
+    half = (planned.energy_kwh_hi - planned.energy_kwh_lo).to_numpy() / 2
+    np.testing.assert_allclose(half[ok], (m.planned_.quantile(0.9) * sd)[ok],
+                               rtol=1e-6)
+    gap = trace_gap(m, small, small["energy_kwh"].to_numpy(), ts)  # the old statistic
+    ratio = small["energy_kwh"].to_numpy() / mu
+    assert gap == pytest.approx(np.sqrt(np.mean(np.log(ratio) ** 2)), rel=1e-9)
 
 
 def test_fit_warns_when_trips_were_read_for_another_vehicle(small):

@@ -14,6 +14,7 @@ COMMAND_MODULES = (
     "hybridev.cli.commands.plan_charging",
     "hybridev.cli.commands.calibrate",
     "hybridev.cli.commands.range",
+    "hybridev.cli.commands.route",
     "hybridev.cli.commands.example_data",
 )
 """Modules registered as subcommands, in help order."""

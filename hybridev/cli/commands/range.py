@@ -88,10 +88,8 @@ def run(args: argparse.Namespace) -> int:
                           ("range_km_q90", "reached with probability 10 %")):
             print(f"  {col[len('range_km_'):]}  {out[col]:7.1f} km   ({note})")
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
-        span = model.fit_info_.get("distance_km_range")
-        if span and out["range_km_q90"] > span[1]:
-            print(f"  note: beyond the longest training trip ({span[1]:.0f} km) the learned "
-                  "residual is held at its value there (hybridev.learning.physical)")
+        print(f"  as a drive of legs of {out['leg_km']:.1f} km (the median training trip; "
+              "hybridev.apps.drive)")
     else:
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
         print("  note: no --model given, so no bands: q10/q50/q90 need a fitted model "

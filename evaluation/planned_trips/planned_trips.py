@@ -1,0 +1,226 @@
+"""Planned trips on M1: held-out trips predicted from their summaries alone (issue 31).
+
+Run from the repository root::
+
+    nice -n 10 python evaluation/planned_trips/planned_trips.py [--data ../shared/realtrips] [--out DIR]
+
+Skips cleanly (exit 0, a message) when the M1 data are absent.
+
+Set-up: the M1 trips and traces (loader of ``evaluation/shift_and_small_data``:
+``VehicleParams.from_coastdown(179.4, 0.28, 0.0235, mass_kg=1919)``, the
+battery capacity that loader uses), 3-fold cross-validation grouped by date
+(``GroupKFold`` on the trip dates; never by trip), ``HybridModel(vehicle)``
+defaults fitted with the logged traces and the date groups. Each fold's held-out
+trips are predicted
+
+* **planned**: from the summary alone (distance, mean speed, temperature, start
+  time and the net grade ``100 * elev_net_m / (1000 * distance_km)`` as
+  ``grade_pct``), no trace: the planned-trip mode of
+  :mod:`hybridev.learning.planned`;
+* **traced**: with their logged traces.
+
+Reported per mode (pooled over folds): 90 % coverage, MAPE, mean width over the
+measured energy, the sharpness ratio (mean width / E over ``2 * q90(|error| /
+E)``, the width that would cover 90 % of the same trips' own out-of-fold errors,
+in the same normalisation) and the number flagged out of the domain. Reviewer
+baselines fitted on the training folds' summaries only: ordinary least squares
+on distance, duration, ``d v^2``, ``duration * |T - 21 °C|`` and elevation gain
+and loss (as ``evaluation/real_weather``); distance times the median kWh/km;
+NNLS on the physics terms of the summary (synthesised trace) statistics. The
+same at 40 training trips (whole days in random order, from each fold's
+training days). Writes ``RESULTS.md`` and ``planned_trips.json`` to ``--out``
+(default: this folder).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "shift_and_small_data"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import shift_and_small_data as ssd  # the M1 loader
+from study_io import DEFAULT_DATA, run_study, write_markdown
+
+from hybridev import HybridModel
+from hybridev.physics.stats_build import trip_stats
+
+HERE = Path(__file__).resolve().parent
+LEVEL = 0.9
+N_FOLDS = 3
+SMALL = 40
+
+
+def _summary(root: Path, ids: np.ndarray) -> pd.DataFrame:
+    """Duration and elevation summaries of the trips ``ids`` (rows in that order)."""
+    src = pd.read_csv(root / "trips.csv")
+    src.index = src["trip_id"].astype(str)
+    s = src.loc[ids]
+    return pd.DataFrame({c: s[c].to_numpy(float) for c in
+                         ("duration_s", "elev_gain_m", "elev_loss_m", "elev_net_m")})
+
+
+def _summary_x(trips: pd.DataFrame, extra: pd.DataFrame) -> np.ndarray:
+    d = trips["distance_km"].to_numpy(float)
+    h = extra["duration_s"].to_numpy(float) / 3600.0
+    v = trips["avg_speed_kmh"].to_numpy(float)
+    t = trips["temperature_c"].to_numpy(float)
+    return np.column_stack([d, h, d * v * v / 1e4, h * np.abs(t - 21.0),
+                            extra["elev_gain_m"].to_numpy(float) / 100.0,
+                            extra["elev_loss_m"].to_numpy(float) / 100.0])
+
+
+def _interval_scores(y: np.ndarray, out: pd.DataFrame) -> dict:
+    lo, hi, p = (out[c].to_numpy(float) for c in ("energy_kwh_lo", "energy_kwh_hi",
+                                                   "energy_kwh_pred"))
+    return {"y": y.tolist(), "pred": p.tolist(), "lo": lo.tolist(), "hi": hi.tolist(),
+            "flagged": (~out["in_domain"].to_numpy(bool)).tolist()}
+
+
+def _summarise(rows: list[dict], key: str) -> dict:
+    y = np.concatenate([r[key]["y"] for r in rows])
+    p, lo, hi = (np.concatenate([r[key][c] for r in rows]) for c in ("pred", "lo", "hi"))
+    err = np.abs(p - y) / y
+    width = (hi - lo) / y
+    need = 2.0 * float(np.quantile(err, 0.9))
+    return {"n": int(y.size), "coverage": float(np.mean((y >= lo) & (y <= hi))),
+            "mape_pct": float(100 * err.mean()), "bias_pct": float(100 * np.mean(p / y - 1)),
+            "width_rel": float(width.mean()), "needed_width_rel": need,
+            "sharpness_ratio": float(width.mean() / need),
+            "flagged": int(sum(int(np.sum(r[key]["flagged"])) for r in rows))}
+
+
+def _baselines(m, extra, tr, te, vehicle, heater_kind) -> dict:
+    from scipy.optimize import nnls
+    from sklearn.linear_model import LinearRegression
+
+    trips = m.trips
+    y = trips["energy_kwh"].to_numpy(float)
+    d = trips["distance_km"].to_numpy(float)
+    xs = _summary_x(trips, extra)
+    out = {"linreg_summary": LinearRegression().fit(xs[tr], y[tr]).predict(xs[te]),
+           "median_kwh_per_km": np.median(y[tr] / d[tr]) * d[te]}
+    kind = heater_kind or ("ptc" if vehicle.heater_kind == "auto" else vehicle.heater_kind)
+    veh = dataclasses.replace(vehicle, heater_kind=kind)  # the terms of the learned heater
+    f = trip_stats(trips, veh, missing_mode="normal").features()  # summary: synthesised
+    keep = np.abs(f).sum(axis=1) > 0
+    w, _ = nnls(f[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
+    out["nnls_physics_terms"] = f[keep][:, te].T @ w
+    return {k: v.tolist() for k, v in out.items()}
+
+
+def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
+    fit_on = ssd._subset(m, np.isin(np.arange(len(m.trips)), tr))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = HybridModel(vehicle=vehicle).fit(fit_on, seed=k, groups=date[np.sort(tr)])
+        x = m.trips.iloc[te].drop(columns=["energy_kwh"]).reset_index(drop=True)
+        y = m.trips["energy_kwh"].to_numpy(float)[te]
+        traced = model.predict_interval(x, LEVEL, timeseries=m.traces.select(
+            x["trip_id"].to_numpy()))
+        planned = model.predict_interval(x.assign(grade_pct=grade[te]), LEVEL)
+    rate = model.gap_rate_
+    return {"fold": k, "n_train": len(tr), "n_test": len(te),
+            "planned_q90": float(model.planned_.quantile(LEVEL)),
+            "traced_q90": float(model.conformal_.quantile(LEVEL)),
+            "gap_rate": rate.rate_, "gap_rate_learned": rate.learned_,
+            "n_shifted": rate.n_shifted_,
+            "planned_corrected": bool(np.any(model.planned_.coef_ != 0)),
+            "planned_mape_pct": float(100 * np.mean(np.abs(
+                planned["energy_kwh_pred"].to_numpy(float) / y - 1))),
+            "traced_mape_pct": float(100 * np.mean(np.abs(
+                traced["energy_kwh_pred"].to_numpy(float) / y - 1))),
+            "planned": _interval_scores(y, planned), "traced": _interval_scores(y, traced),
+            # planned trips flagged although the same trip with its trace is not
+            "flagged_planned_only": int(np.sum(~planned["in_domain"].to_numpy(bool)
+                                               & traced["in_domain"].to_numpy(bool))),
+            "baselines": _baselines(m, extra, np.sort(tr), te, vehicle, model.heater_kind_)}
+
+
+def run(root: Path) -> dict:
+    from sklearn.model_selection import GroupKFold
+
+    m, date, vehicle = ssd.load_m1(root)
+    extra = _summary(root, m.trips["trip_id"].to_numpy())
+    grade = 100.0 * extra["elev_net_m"].to_numpy(float) / (
+        1000.0 * m.trips["distance_km"].to_numpy(float))
+    n = len(m.trips)
+    res = {"all": [], "small": []}
+    for k, (tr, te) in enumerate(GroupKFold(N_FOLDS).split(np.zeros(n), groups=date)):
+        res["all"].append(_fold(m, date, extra, vehicle, tr, te, k, grade=grade))
+        print({key: v for key, v in res["all"][-1].items() if not isinstance(v, dict)},
+              flush=True)
+        days = np.random.default_rng(k).permutation(np.unique(date[tr]))
+        order = np.concatenate([tr[date[tr] == d] for d in days])
+        res["small"].append(_fold(m, date, extra, vehicle, np.sort(order[:SMALL]), te, k,
+                                  grade=grade))
+    return res
+
+
+def _tables(res: dict) -> dict:
+    out = {}
+    for size, rows in res.items():
+        s = {"planned": _summarise(rows, "planned"), "traced": _summarise(rows, "traced")}
+        y = np.concatenate([r["planned"]["y"] for r in rows])
+        for b in rows[0]["baselines"]:
+            p = np.concatenate([r["baselines"][b] for r in rows])
+            s[b] = {"mape_pct": float(100 * np.mean(np.abs(p - y) / y)),
+                    "bias_pct": float(100 * np.mean(p / y - 1))}
+        s["folds"] = [{k: v for k, v in r.items() if not isinstance(v, dict)} for r in rows]
+        out[size] = s
+    return out
+
+
+def main(argv=None) -> int:
+    data = DEFAULT_DATA
+    if argv is None and "--data" in sys.argv:
+        data = Path(sys.argv[sys.argv.index("--data") + 1])
+    if not (data / "trips.csv").is_file():
+        print(f"planned_trips: no M1 data at {data}; skipped")
+        return 0
+    res, out = run_study(__doc__, "planned_trips", lambda root: _tables(run(root)), HERE, argv)
+    t = res["rows"]
+    lines = ["# Planned trips on M1 (no logged trace) against the same trips with traces", "",
+             f"Generated by `python evaluation/planned_trips/planned_trips.py` in "
+             f"{res['runtime_s']} s; do not edit by hand. Set-up: the script's docstring "
+             f"({N_FOLDS} date-grouped folds, `HybridModel(vehicle)` defaults, 90 % "
+             "intervals, pooled over the folds' held-out trips).", ""]
+    for size, title in (("all", "All training trips of each fold"),
+                        ("small", f"{SMALL} training trips per fold (whole days)")):
+        s = t[size]
+        lines += [f"## {title}", "",
+                  "| prediction | trips | coverage | MAPE % | bias % | mean width / E | "
+                  "width needed (2 q90 abs err / E) | sharpness ratio | flagged |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for mode in ("planned", "traced"):
+            r = s[mode]
+            lines.append(f"| {mode} | {r['n']} | {r['coverage']:.3f} | {r['mape_pct']:.2f} | "
+                         f"{r['bias_pct']:+.2f} | {r['width_rel']:.3f} | "
+                         f"{r['needed_width_rel']:.3f} | {r['sharpness_ratio']:.2f} | "
+                         f"{r['flagged']} |")
+        lines += ["", "| summary baseline (same held-out trips) | MAPE % | bias % |",
+                  "|---|---|---|"]
+        for b in ("linreg_summary", "median_kwh_per_km", "nnls_physics_terms"):
+            lines.append(f"| {b} | {s[b]['mape_pct']:.2f} | {s[b]['bias_pct']:+.2f} |")
+        lines += ["", "| fold | train | test | planned q90 | traced q90 | gap rate | "
+                  "learned | shifted OOF trips | planned mean corrected | planned MAPE % | "
+                  "traced MAPE % | flagged planned, not traced |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for f in s["folds"]:
+            lines.append(f"| {f['fold']} | {f['n_train']} | {f['n_test']} | "
+                         f"{f['planned_q90']:.2f} | {f['traced_q90']:.2f} | "
+                         f"{f['gap_rate']:.2f} | {f['gap_rate_learned']} | "
+                         f"{f['n_shifted']} | {f['planned_corrected']} | "
+                         f"{f['planned_mape_pct']:.2f} | {f['traced_mape_pct']:.2f} | "
+                         f"{f['flagged_planned_only']} |")
+        lines.append("")
+    return write_markdown(out, "RESULTS", lines, res["runtime_s"])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,310 @@
+"""Planned trips: calibrated predictions of trips that have no logged trace.
+
+A model fitted on logged speed traces predicts a trip not yet driven from its
+summary alone (distance, mean speed, temperature, start time, optional
+``grade_pct``): the physics runs on a synthesised trace. Such a prediction
+errs differently from one on the trip's own trace (the synthesised trace's
+stop-and-go and speed variation are not this driver's), so it is calibrated on
+its own scores, learned at fit on the training trips themselves:
+
+* **CV+ fits** (``conformal="cv+"``, small data sets): every trip is predicted
+  *without its trace* by the CV+ fold model that did not see its day
+  (``cv_nets_`` with its own physics ``cv_physics_``, grouped folds as the CV+
+  step), against its measured energy;
+* **split fits**: the held-out calibration trips are predicted without their
+  traces by the final model.
+
+A synthesised trace is smoother than how a given car is driven (idling,
+stop-and-go at low mean speed), so summary-only predictions are biased in a way
+that depends on the conditions. The calibrator learns a multiplicative
+correction ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` mean speed in km/h, ``T``
+in °C) by ridge regression of the out-of-fold log ratios ``ln(E / mu)``; it
+scales the whole summary-only distribution (mean and spread). The scores are
+*cross-fitted*: a trip's score uses the correction fitted on the other folds'
+trips only, so that the calibration stays out of sample; and the correction is
+kept only when, so cross-fitted, it lowers the mean absolute log error of the
+scored trips by at least 10 % (else ``coef_`` is zero: no correction); the
+speed and temperature are held inside those of the scored trips (no
+extrapolation of the correction).
+
+The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
+summary-only predictive mean and standard deviation of the scoring model) make
+a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
+conformal interval ``mu +- q s`` with the final model's summary-only ``mu``
+and ``s`` and ``q`` the conformal quantile of the scores of the scored trips
+*inside their fold's training domain* (``fold_gaps <= 1``); trips outside it
+teach the widening rate instead (:mod:`hybridev.learning.shift`).
+:meth:`HybridModel.predict_distribution` scales the spread of a planned trip
+by :meth:`PlannedTripCalibrator.spread_factor` (range and charging use it).
+
+A trip is not out of the domain because it lacks a trace: with a calibrator
+the model's domain is recorded with ``needs_trace=False``. Models saved
+without this state (older files, or fitted without traces) behave as before.
+
+In the predictive path (:mod:`hybridev.learning.pipeline`) the calibrator is
+the component ``planned_`` of the model, made by
+:func:`hybridev.learning.fitting.fit_planned`. Its trips are those the
+:class:`~hybridev.learning.steps.DomainAssessment` finds without a logged trace
+(``has_trace``). It acts once, right after the
+:class:`~hybridev.learning.calibrate.Calibrator` (step 5), on those rows only:
+:meth:`PlannedTripCalibrator.calibrate` scales their raw prediction by the mean
+correction and gives them ``mu +- q s``; :meth:`PlannedTripCalibrator.spread`
+does the same for ``predict_distribution``; :meth:`PlannedTripCalibrator.correct_point`
+scales ``predict``'s energy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+
+from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.predictive import raw_prediction
+from hybridev.learning.steps import CalibratedInterval, RawPrediction
+
+__all__ = ["PlannedTripCalibrator", "conditions_of"]
+
+
+@dataclasses.dataclass
+class PlannedTripCalibrator:
+    """Normalised conformal calibration of summary-only (planned-trip) predictions.
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    residuals_ : numpy.ndarray, shape (n,)
+        Signed normalised out-of-fold scores ``(E - mu) / s`` of the training
+        trips predicted without their traces.
+    gap_ : numpy.ndarray, shape (n,)
+        Each scored trip's largest intensive gap to its fold's training domain.
+    conformal_ : NormalizedConformal
+        The scores used for intervals: those with ``gap_ <= 1`` when at least
+        :data:`MIN_INSIDE` of them, else all.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> mu, s = np.full(300, 10.0), np.full(300, 0.5)
+    >>> cal = PlannedTripCalibrator().fit(mu + rng.normal(0, 1.0, 300), mu, s)
+    >>> lo, hi = cal.interval(np.array([10.0]), np.array([0.5]), 0.9)
+    >>> bool(1.4 < (hi - lo)[0] / 2 < 1.9)   # about 1.645 * 1.0
+    True
+    """
+
+    MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
+
+    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None
+            ) -> PlannedTripCalibrator:
+        """Scores (and the mean correction) from measured energies and summary-only predictions.
+
+        Parameters
+        ----------
+        y, mean, std : array_like, shape (n,), kWh
+            Measured energies, out-of-fold summary-only predictive means and
+            standard deviations (> 0).
+        gap : array_like, shape (n,), optional
+            Intensive gap of each trip to its fold's domain (default 0).
+        conditions : array_like, shape (n, 2), optional
+            Mean speed (km/h) and temperature (°C) of each trip: with them, the
+            mean correction is learned (else none, ``coef_`` zeros).
+        fold : array_like of int, shape (n,), optional
+            Folds of the cross-fitting of the correction (default: 5 blocks of
+            consecutive trips).
+        """
+        y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+        self.coef_ = np.zeros(len(_CORRECTION_TERMS))
+        self.conditions_range_ = np.array([[0.0, -273.15], [np.inf, np.inf]])
+        if conditions is not None:
+            c = np.asarray(conditions, float)
+            lr = np.log(np.maximum(y, 1e-9) / np.maximum(mean, 1e-9))
+            fold = (np.arange(len(y)) * 5 // max(len(y), 1) if fold is None
+                    else np.asarray(fold, int))
+            factor = np.ones(len(y))
+            for f in np.unique(fold):  # cross-fitted: each trip corrected out of fold
+                rest = fold != f
+                if rest.sum() >= 2 * len(_CORRECTION_TERMS):
+                    held = np.clip(c[~rest], c[rest].min(axis=0), c[rest].max(axis=0))
+                    factor[~rest] = np.exp(_design(held) @ _ridge(c[rest], lr[rest]))
+            # kept only when it clearly helps out of fold (on M1 the networks leave no
+            # bias to correct, and an offset corrected from the other days adds error)
+            if np.mean(np.abs(lr - np.log(factor))) < _MIN_GAIN * np.mean(np.abs(lr)):
+                mean, std = mean * factor, std * factor
+                self.coef_ = _ridge(c, lr)
+                self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
+        cp = NormalizedConformal.fit(y, mean, std)
+        g = np.zeros(cp.n_calibration) if gap is None else np.asarray(gap, float)
+        if g.shape != cp.residuals.shape:
+            raise ValueError(f"gap must have one value per trip ({cp.n_calibration}); "
+                             f"got shape {g.shape}")
+        self.residuals_, self.gap_ = cp.residuals, g
+        self._build()
+        return self
+
+    def _build(self) -> None:
+        inside = self.gap_ <= 1.0
+        r = self.residuals_[inside] if inside.sum() >= self.MIN_INSIDE else self.residuals_
+        self.conformal_ = NormalizedConformal(r)
+
+    def correction(self, conditions) -> np.ndarray:
+        """Multiplicative mean correction per trip, shape (n,), from (n, 2) conditions.
+
+        The conditions are held inside those of the scored trips
+        (``conditions_range_``): the correction does not extrapolate.
+        """
+        lo, hi = self.conditions_range_
+        held = np.clip(np.atleast_2d(np.asarray(conditions, float)), lo, hi)
+        return np.exp(_design(held) @ self.coef_)
+
+    @property
+    def n_calibration(self) -> int:
+        """Scores behind the intervals."""
+        return self.conformal_.n_calibration
+
+    def quantile(self, level: float) -> float:
+        """Conformal quantile ``q`` (``inf`` when ``level`` is too high for the scores)."""
+        return self.conformal_.quantile(level)
+
+    def spread_factor(self, level: float) -> float:
+        """Multiplier on the predictive spread matching :meth:`quantile`."""
+        return self.conformal_.spread_factor(level)
+
+    def interval(self, mean, std, level: float) -> tuple[np.ndarray, np.ndarray]:
+        """``mean +- q std`` (kWh), shape of ``mean``."""
+        return self.conformal_.interval(mean, std, level)
+
+    def lower_bound(self, mean, std, level: float) -> np.ndarray:
+        """One-sided conformal lower bound ``mean - q' std`` (kWh)."""
+        return self.conformal_.lower_bound(mean, std, level)
+
+    # -- the predictive path (step 5, planned rows) ---------------------------------------
+    def _factor(self, table: pd.DataFrame, rows: np.ndarray) -> np.ndarray:
+        """Mean correction per trip (n_trips,): :meth:`correction` on ``rows``, 1 elsewhere."""
+        f = np.ones(len(table))
+        f[rows] = self.correction(conditions_of(table.iloc[np.flatnonzero(rows)]))
+        return f
+
+    def correct_point(self, energy: np.ndarray, columns: dict, rows: np.ndarray) -> np.ndarray:
+        """``predict``'s energy (n_trips,), kWh, with ``rows`` scaled by the mean correction."""
+        cond = np.column_stack([columns["avg_speed_kmh"], columns["temperature_c"]])[rows]
+        out = np.array(energy, float, copy=True)
+        out[rows] = out[rows] * self.correction(cond)
+        return out
+
+    def correct(self, raw: RawPrediction, rows: np.ndarray) -> RawPrediction:
+        """``raw`` with the distributions of ``rows`` scaled by the mean correction
+        (physics draws, residual means and spreads; every CV+ fold's too)."""
+        f = self._factor(raw.table, rows)
+        dists = [dataclasses.replace(d, physics_draws_kwh=d.physics_draws_kwh * f,
+                                     residual_mean_kwh=d.residual_mean_kwh * f,
+                                     residual_std_kwh=d.residual_std_kwh * f, _cache={})
+                 for d in (raw.dist, *raw.folds)]
+        return raw_prediction(raw.table, dists, raw.mode_means)
+
+    def _level(self, level: float) -> tuple[float, float]:
+        """``(q, q')`` of ``level``: the two-sided quantile and the one-sided factor."""
+        q = self.quantile(level)
+        if not np.isfinite(q):
+            raise ValueError(f"level={level!r} is too high for the {self.n_calibration} "
+                             "planned-trip calibration scores (trips predicted without a "
+                             "trace); the highest level they support is "
+                             f"{self.n_calibration / (self.n_calibration + 1):.3f}")
+        return q, float(-np.asarray(self.lower_bound(0.0, 1.0, level)))
+
+    def calibrate(self, raw: RawPrediction, cal: CalibratedInterval, level: float,
+                  rows: np.ndarray) -> tuple[RawPrediction, CalibratedInterval]:
+        """Step 5 for planned trips: ``(raw, interval)`` with ``rows`` corrected
+        (:meth:`correct`) and given ``mu +- q s`` (and the one-sided ``mu - q' s``).
+
+        The other rows keep ``cal``'s interval; ``quantile`` and ``quantile_one`` of
+        the result are per trip (NaN where the model has no conformal step).
+        """
+        q, q1 = self._level(level)
+        raw = self.correct(raw, rows)
+        mu, sd = raw.mean, raw.std
+        n = len(mu)
+        qs = np.full(n, np.nan if cal.quantile is None else 0.0)
+        q1s = np.full(n, np.nan if cal.quantile_one is None else 0.0)
+        if cal.quantile is not None:
+            qs += cal.quantile
+        if cal.quantile_one is not None:
+            q1s += cal.quantile_one
+        qs[rows], q1s[rows] = q, q1
+        lo, hi, lo_one = (np.array(a, float, copy=True) for a in (cal.lo, cal.hi, cal.lo_one))
+        lo[rows], hi[rows] = mu[rows] - q * sd[rows], mu[rows] + q * sd[rows]
+        lo_one[rows] = mu[rows] - q1 * sd[rows]
+        mean = np.where(rows, mu, cal.mean)
+        std = np.where(rows, sd, cal.std)
+        return raw, CalibratedInterval(mean=mean, std=std, lo=lo, hi=hi, lo_one=lo_one,
+                                       spread_factor=cal.spread_factor, quantile=qs,
+                                       quantile_one=q1s)
+
+    def spread(self, raw: RawPrediction, factor: float, level: float, rows: np.ndarray
+               ) -> tuple[RawPrediction, np.ndarray]:
+        """Step 5 of ``predict_distribution`` for planned trips: ``(raw, factor)`` with
+        ``rows`` corrected and given this calibrator's spread factor (per trip)."""
+        fp = self.spread_factor(level)
+        if not np.isfinite(fp):
+            self._level(level)  # raises
+        f = np.full(len(raw.mean), float(factor))
+        f[rows] = max(fp, 1e-6)
+        return self.correct(raw, rows), f
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """State for the saved model."""
+        return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
+                "conditions_range": self.conditions_range_}
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
+        """Inverse of :meth:`to_arrays` (ValueError on a missing or bad array)."""
+        try:
+            r, g = np.asarray(a["residuals"], float), np.asarray(a["gap"], float)
+        except KeyError as exc:
+            raise ValueError(f"planned-trip calibration: array {exc} is missing") from None
+        if r.shape != g.shape or r.ndim != 1 or not np.all(np.isfinite(g)):
+            raise ValueError("planned-trip calibration: residuals and gap must be 1-D arrays "
+                             f"of equal length; got {r.shape}, {g.shape}")
+        coef = np.asarray(a.get("coef", np.zeros(len(_CORRECTION_TERMS))), float)
+        if coef.shape != (len(_CORRECTION_TERMS),) or not np.all(np.isfinite(coef)):
+            raise ValueError(f"planned-trip calibration: coef must be "
+                             f"{len(_CORRECTION_TERMS)} finite values; got {coef!r}")
+        rng_ = np.asarray(a.get("conditions_range", [[0.0, -273.15], [np.inf, np.inf]]), float)
+        if rng_.shape != (2, 2):
+            raise ValueError(f"planned-trip calibration: conditions_range must be (2, 2); "
+                             f"got {rng_.shape}")
+        out = cls()
+        out.residuals_, out.gap_, out.coef_, out.conditions_range_ = r, g, coef, rng_
+        out._build()
+        return out
+
+
+_CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
+_RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
+_MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
+
+
+def _design(conditions: np.ndarray) -> np.ndarray:
+    """Columns of :data:`_CORRECTION_TERMS` from (n, 2) speed (km/h), temperature (°C)."""
+    c = np.atleast_2d(conditions)
+    return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)),
+                            c[:, 1] / 10.0])
+
+
+def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Ridge coefficients of ``target`` on :func:`_design`, slopes shrunk by :data:`_RIDGE`."""
+    x = _design(conditions)
+    mu, sd = x[:, 1:].mean(axis=0), x[:, 1:].std(axis=0)
+    sd = np.where(sd > 1e-9, sd, 1.0)
+    z = (x[:, 1:] - mu) / sd
+    t0 = float(np.mean(target))
+    b = np.linalg.solve(z.T @ z + _RIDGE * np.eye(z.shape[1]), z.T @ (target - t0))
+    slopes = b / sd
+    return np.r_[t0 - mu @ slopes, slopes]
+
+
+def conditions_of(table: pd.DataFrame) -> np.ndarray:
+    """(n, 2) mean speed (km/h) and temperature (°C) of a trip table."""
+    return np.column_stack([table["avg_speed_kmh"].to_numpy(float),
+                            table["temperature_c"].to_numpy(float)])
+

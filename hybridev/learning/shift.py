@@ -1,0 +1,194 @@
+"""How much wider intervals must be outside the training conditions: a learned rate.
+
+A trip whose intensive conditions (temperature, speed, grade;
+:mod:`hybridev.learning.domain`) lie a gap ``g > 1`` tolerances away from
+every training trip gets its interval widened by the factor
+
+``inflation(g) = clip(1 + rate * (g - 1), 1, 3)``.
+
+The rate used to be a fixed 0.25 (:data:`~hybridev.learning.domain.OOD_INFLATION_PER_UNIT`).
+:class:`GapRate` learns it from the fit's own out-of-sample scores instead:
+the conformal step already scores every trip (CV+) or a held-out share (split)
+with a model that did not see its day. Trips whose day brought conditions the
+other days lack lie *outside their fold's training domain* (the domain is
+re-recorded from each fold's training trips): they are natural shift
+experiments. Each such trip's normalised score ``a_i = |y - mu| / s``,
+over the in-domain conformal quantile ``q`` at the fit level (0.9), says
+how much wider its interval needed to be; ``k_i = (a_i / q - 1) / (g_i - 1)``
+is the rate that would just have covered it. The learned rate is the linear
+quantile regression (at the same level) of ``a_i / q - 1`` on ``g_i - 1``
+through the origin: the smallest rate that covers about 90 % of the shifted
+trips, each weighted by its gap ``g_i - 1`` (the minimiser of the pinball loss
+is the weighted quantile of the ``k_i``). The weights make it robust: a trip
+just outside its fold's domain with an ordinary large score (one in ten has
+one inside the domain too) has a huge ``k_i`` but almost no weight. It is
+floored at :data:`GAP_RATE_FLOOR` (a width that does not grow at all away from
+the data is not credible however few trips say so) and capped at
+:data:`GAP_RATE_CAP`. With fewer than :data:`MIN_SHIFTED_TRIPS` shifted trips
+the rate is the larger of that estimate and the fixed 0.25 (conservative).
+The in-domain quantile ``q`` needs at least 9 in-domain trips; with fewer, all
+the trips' scores give it.
+
+Why not weighted conformal prediction (Tibshirani et al. 2019)? It re-weights
+the calibration scores by the likelihood ratio of the new trip's conditions;
+for a trip outside the training conditions that ratio is unbounded and the
+weighted quantile is infinite, so it helps only for moderate shifts inside the
+data's support, where :mod:`hybridev.learning.domain` already finds a trip in
+the domain. With 20-100 trips from a handful of days the density ratio itself
+would be the least reliable part. The rate above answers the question that
+matters beyond the support, with the data's own shifted trips.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain
+
+__all__ = ["FIT_LEVEL", "GAP_RATE_CAP", "GAP_RATE_FLOOR", "MAX_INFLATION", "MIN_SHIFTED_TRIPS", "GapRate",
+           "fold_gaps"]
+
+FIT_LEVEL = 0.9
+"""Confidence level at which the rate is learned (and the in-domain quantile taken)."""
+
+GAP_RATE_FLOOR = 0.1
+"""Smallest learned rate: the width grows at least 10 % per tolerance beyond the data."""
+
+GAP_RATE_CAP = 2.0
+"""Largest learned rate: the inflation then reaches its cap (3) at a gap of 2."""
+
+MIN_SHIFTED_TRIPS = 9
+"""Shifted trips needed for the 0.9 quantile of their rates (``ceil(10 * 0.9) <= 9``)."""
+
+MAX_INFLATION = 3.0
+"""Cap of the inflation factor (as before the learned rate)."""
+
+
+@dataclass
+class GapRate:
+    """Learned widening rate per unit of intensive domain gap.
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    rate_ : float
+        Inflation per unit gap beyond 1, dimensionless.
+    n_shifted_ : int
+        Scored trips outside their fold's training domain that it was learned from.
+    learned_ : bool
+        Whether the quantile was defined (``n_shifted_ >= MIN_SHIFTED_TRIPS``).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> gap = np.r_[np.zeros(200), rng.uniform(1.0, 5.0, 60)]
+    >>> scores = rng.normal(size=260) * (1.0 + 0.5 * np.maximum(gap - 1.0, 0.0))
+    >>> r = GapRate().fit(scores, gap)
+    >>> 0.3 < r.rate_ < 1.0, r.n_shifted_
+    (True, 60)
+    """
+
+    def fit(self, scores, gaps, *, level: float = FIT_LEVEL) -> GapRate:
+        """Learn the rate from normalised scores and their gaps.
+
+        Parameters
+        ----------
+        scores : array_like, shape (n,) or a sequence of such arrays
+            Signed normalised out-of-sample scores ``(y - mu) / s``. Several
+            arrays (e.g. the scores with and without logged traces) are pooled,
+            each against its own in-domain quantile.
+        gaps : array_like, shape (n,) or a sequence of such arrays
+            Each trip's largest intensive gap to its fold's training domain.
+        level : float
+            Level of the in-domain quantile and of the rate's quantile.
+        """
+        if isinstance(scores, np.ndarray) or np.ndim(scores[0]) == 0:
+            scores, gaps = [scores], [gaps]
+        k, w = [], []
+        for s, g in zip(scores, gaps, strict=True):
+            a, g = np.abs(np.asarray(s, float)), np.asarray(g, float)
+            if a.shape != g.shape:
+                raise ValueError(f"scores and gaps must have one value per trip; got "
+                                 f"{a.shape}, {g.shape}")
+            out = g > 1.0
+            if not out.any() or a.size < 9:
+                continue
+            inside = a[~out] if (~out).sum() >= 9 else a
+            q = max(_conformal_quantile(inside, level), 1e-12)
+            k.append((a[out] / q - 1.0) / (g[out] - 1.0))
+            w.append(g[out] - 1.0)
+        k = np.concatenate(k) if k else np.zeros(0)
+        self.n_shifted_ = int(k.size)
+        self.learned_ = bool(k.size >= MIN_SHIFTED_TRIPS)
+        rate = _weighted_quantile(k, np.concatenate(w), level) if k.size else 0.0
+        if not self.learned_:
+            rate = max(rate, OOD_INFLATION_PER_UNIT)
+        self.rate_ = float(np.clip(rate, GAP_RATE_FLOOR, GAP_RATE_CAP))
+        return self
+
+    def inflation(self, gap) -> np.ndarray:
+        """Width multiplier ``clip(1 + rate_ (gap - 1), 1, 3)``, shape of ``gap``."""
+        g = np.asarray(gap, float)
+        return np.clip(1.0 + self.rate_ * (g - 1.0), 1.0, MAX_INFLATION)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """State for the saved model: ``{"state": [rate_, n_shifted_, learned_]}``."""
+        return {"state": np.array([self.rate_, self.n_shifted_, float(self.learned_)])}
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> GapRate:
+        """Inverse of :meth:`to_arrays` (ValueError on a bad array)."""
+        s = np.asarray(a.get("state", []), float)
+        if s.shape != (3,) or not np.all(np.isfinite(s)) or s[0] < 0:
+            raise ValueError(f"gap rate: array 'state' must hold 3 finite values; got {s!r}")
+        out = cls()
+        out.rate_, out.n_shifted_, out.learned_ = float(s[0]), int(s[1]), bool(s[2])
+        return out
+
+
+def _conformal_quantile(values: np.ndarray, level: float) -> float:
+    """The ``ceil((n + 1) level)``-th smallest value (the largest when that exceeds n)."""
+    v = np.sort(np.asarray(values, float))
+    return float(v[min(math.ceil((v.size + 1) * level), v.size) - 1])
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level: float) -> float:
+    """Smallest value whose cumulative weight share reaches ``level``."""
+    order = np.argsort(values)
+    cum = np.cumsum(weights[order]) / max(float(weights.sum()), 1e-300)
+    return float(values[order][min(int(np.searchsorted(cum, level)), values.size - 1)])
+
+
+def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
+              score_traces=None) -> np.ndarray:
+    """Each scored trip's largest intensive gap to its fold's training domain, (n,).
+
+    Parameters
+    ----------
+    trips : pandas.DataFrame, (n, ...)
+        Validated trips (domain columns, ``trip_id``).
+    fold : numpy.ndarray of int, shape (n,)
+        Fold of each trip (-1: never scored; its gap is 0). The training domain
+        of fold ``f`` is recorded from the trips with ``fold != f`` (and ``fold
+        >= 0`` unless every scored trip is in one fold: then from ``fold == -1``,
+        the split-conformal case).
+    traces : LoggedTraces, optional
+        Traces of the training trips (their grade).
+    score_traces : LoggedTraces, optional
+        Traces with which the scored trips are scored (None: summary only).
+    """
+    fold = np.asarray(fold, int)
+    out = np.zeros(len(trips))
+    folds = np.unique(fold[fold >= 0])
+    for f in folds:
+        train = (fold != f) & ((fold >= 0) | (len(folds) == 1))
+        if not train.any():
+            continue
+        dom = TrainingDomain.fit(trips.iloc[np.flatnonzero(train)], np.zeros((train.sum(), 1)),
+                                 traces=traces)
+        held = np.flatnonzero(fold == f)
+        out[held] = dom.gap(trips.iloc[held], score_traces)
+    return out
