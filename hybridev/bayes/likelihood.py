@@ -172,7 +172,10 @@ class _LogPosterior:
 
     def log_lik(self, theta: np.ndarray) -> np.ndarray:
         v = self.values(theta)
-        full = np.stack([np.broadcast_to(c, (len(theta),)) for c in coefficients(v)], axis=1)
+        coef = coefficients(v)
+        full = np.empty((len(theta), len(coef)))
+        for i, c in enumerate(coef):  # as stacking broadcast columns, without their overhead
+            full[:, i] = c
         e = full[:, self.rows] @ self.F
         if self.dH is not None:  # the heating onset moves the heating and warm-up terms
             d = v["heating_offset_k"][:, None] - self.offset0

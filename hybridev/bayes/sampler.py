@@ -74,6 +74,7 @@ __all__ = [
     "calibrate_physics",
     "group_labels",
     "simulate_measured",
+    "warm_start_walkers",
 ]
 
 def _moves():
@@ -124,7 +125,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
                       max_steps: int = 20000, trace_steps: int = 1000, trace_seed: int = 0,
                       refine_sign: bool = True, groups="auto",
                       climate_params: bool | None = None,
-                      sign_vehicle: VehicleParams | None = None) -> PhysicsPosterior:
+                      sign_vehicle: VehicleParams | None = None,
+                      init_walkers: np.ndarray | None = None) -> PhysicsPosterior:
     """Sample the posterior of physics parameters given measured trip energies.
 
     Parameters
@@ -176,6 +178,11 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         (no refinement): posteriors sampled with the same ``sign_vehicle``
         share their statistics (the CV+ folds of :class:`hybridev.HybridModel`
         use the full posterior's ``reference_vehicle``).
+    init_walkers : numpy.ndarray, shape (n_walkers, n_dim), optional
+        Start the walkers here (rows of another posterior's ``sampler_draws_``
+        with the same parameters, e.g. the full posterior for a CV+ fold's
+        trips) instead of around the MAP, which is then not searched: a warm
+        start that needs no long burn-in (:func:`warm_start_walkers`).
     groups : "auto", str, array_like (n_trips,) or None
         Trips that share a day or session share part of their error (same
         weather, traffic, driver, tyre pressure). With groups the likelihood
@@ -193,6 +200,8 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     Returns
     -------
     PhysicsPosterior
+        Its ``sampler_draws_`` (not saved with a model) holds the thinned chain in the
+        sampler's coordinates, ``(n_draws, n_dim)``: the start of a warm run.
 
     Warns
     -----
@@ -290,6 +299,17 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
     s0 = np.clip(s0 if np.isfinite(s0) else 0.1,
                  *(np.array(pr.noise_rel_bounds) * [1.01, 0.99]))
     start = np.r_[x0, np.log(s0)]
+    if init_walkers is not None and np.shape(init_walkers) == (n_walkers, ndim):
+        return _warm_run(init_walkers, logpost, n_walkers, ndim, n_steps, seed, progress,
+                         post_kw=dict(names=names, vehicle=veh,
+                                      reference_vehicle=veh if sign_vehicle is None
+                                      else sign_vehicle, prior=pr,
+                                      missing_mode="marginalize" if want_infer and not infer
+                                      else missing_mode,
+                                      trace_steps=trace_steps, trace_seed=trace_seed,
+                                      n_group=n_group, noise_dof=pr.noise_dof),
+                         t0=t0, finish=lambda post: attach_outliers(
+                             post, stats, trips, y, codes if n_group else None, pr.noise_dof))
     theta, cov = _map_and_cov(logpost, start, scale)
     ref = veh if sign_vehicle is None else sign_vehicle
     if sign_vehicle is None and refine_sign and {"drag_area_m2", "rolling_resistance_coef",
@@ -340,9 +360,53 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         sampler, names, vehicle=veh, reference_vehicle=ref, prior=pr, map_theta=theta,
         missing_mode=mm_out, trace_steps=trace_steps, trace_seed=trace_seed,
         elapsed_s=time.perf_counter() - t0, n_group=n_group, noise_dof=pr.noise_dof)
+    post.sampler_draws_ = _thinned_chain(sampler, post)
+    post.diagnostics["warm_start"] = False
     if heater is not None:
         post.diagnostics["heater"] = heater.to_dict()
     attach_outliers(post, stats, trips, y, codes if n_group else None, pr.noise_dof)
+    return post
+
+
+def _thinned_chain(sampler, post: PhysicsPosterior) -> np.ndarray:
+    """The chain behind ``post`` in the sampler's coordinates (same burn-in and thinning)."""
+    d = post.diagnostics
+    return sampler.get_chain(discard=d["burn_in"], thin=d["thin"], flat=True)
+
+
+def warm_start_walkers(draws: np.ndarray, n_walkers: int, seed: int) -> np.ndarray:
+    """``n_walkers`` distinct rows of ``draws`` (a posterior's ``sampler_draws_``), seeded.
+
+    Fewer rows than walkers: rows are repeated with a jitter of 1e-3 of each
+    coordinate's spread, so that the ensemble is not degenerate.
+    """
+    draws = np.asarray(draws, dtype=float)
+    rng = np.random.default_rng(seed)
+    if len(draws) >= n_walkers:
+        return draws[np.sort(rng.choice(len(draws), n_walkers, replace=False))]
+    p0 = draws[rng.integers(0, len(draws), n_walkers)]
+    sd = np.maximum(draws.std(axis=0), 1e-9)
+    return p0 + 1e-3 * sd * rng.standard_normal(p0.shape)
+
+
+def _warm_run(p0, logpost, n_walkers: int, ndim: int, n_steps, seed: int, progress: bool,
+              *, post_kw: dict, t0: float, finish) -> PhysicsPosterior:
+    """A fixed-length emcee run from ``p0`` (no MAP search): :func:`calibrate_physics`
+    with ``init_walkers``."""
+    p0 = np.array(p0, dtype=float)
+    if n_steps is None:
+        raise ValueError("init_walkers needs n_steps (a warm run has a fixed length)")
+    if not np.all(np.isfinite(logpost(p0))):
+        raise ValueError("init_walkers has rows outside the prior's support")
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, logpost, vectorize=True, moves=_moves())
+    legacy_seed = seed if seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
+    sampler.random_state = np.random.RandomState(legacy_seed).get_state()
+    sampler.run_mcmc(p0, int(n_steps), progress=progress)
+    post = PhysicsPosterior.from_sampler(sampler, map_theta=np.median(p0, axis=0),
+                                         elapsed_s=time.perf_counter() - t0, **post_kw)
+    post.diagnostics["warm_start"] = True
+    post.sampler_draws_ = _thinned_chain(sampler, post)
+    finish(post)
     return post
 
 

@@ -20,6 +20,24 @@ independent draws: enough for the median and spread that the scores use; their
 chain-length warnings are silenced) and sampled with the full posterior's sign
 split, so all folds share one set of statistics at prediction time.
 
+Warm start (issue 34): each fold's walkers start at draws of the full posterior
+(:func:`hybridev.bayes.sampler.warm_start_walkers`) and run
+:data:`FOLD_WARM_STEPS` steps, with no MAP search. Chosen over importance
+re-weighting of the full posterior's draws by ``1 / L(held-out trips)``: a fold
+holds out a fifth of the trips and, with the group (day) effect, whole days, so
+the weights are heavy-tailed (the effective sample size of IS leave-a-fifth-out is
+typically a few percent of the draws) and the fallback would run in most folds;
+and the fold's posterior must also be a proper sample for its discrepancy fit.
+Removing a fifth of the trips moves the posterior by a fraction of its spread, so
+walkers drawn from the full posterior are already close to the fold's stationary
+distribution: the run needs no long burn-in, and the first half it discards (the
+burn-in of :meth:`~hybridev.bayes.posterior.PhysicsPosterior.from_sampler`) covers
+the remaining shift. A fold whose posterior has other dimensions than the full
+one (its trips are all labelled, so no mode weights to infer) falls back to the
+MAP start with :data:`FOLD_POSTERIOR_STEPS` steps. The per-fold diagnostics
+(start, steps, acceptance, autocorrelation time) are in ``fit_info_["cv_folds"]``
+via :func:`fold_diagnostics`.
+
 Documented shortcuts: the fold ensembles share the final model's input and
 target standardisation (means and scales), and unlabelled trips use the full
 posterior's mode weights in every fold.
@@ -41,17 +59,21 @@ import numpy as np
 
 from hybridev.bayes.discrepancy import TermDiscrepancy
 from hybridev.bayes.posterior import PhysicsPosterior
+from hybridev.bayes.sampler import warm_start_walkers
 from hybridev.core.errors import CalibrationWarning, ConvergenceWarning
 from hybridev.learning.conformal import CVPlusConformal, min_calibration_trips
 from hybridev.learning.features import trip_features
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
-__all__ = ["FOLD_POSTERIOR_STEPS", "MIN_GROUPS", "fit_cv_plus", "nets_from_arrays",
-           "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
+__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "fit_cv_plus",
+           "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
-"""emcee steps of each CV+ fold's physics posterior."""
+"""emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
+
+FOLD_WARM_STEPS = 200
+"""emcee steps of a CV+ fold's physics posterior started at the full posterior's draws."""
 
 MIN_GROUPS = 5
 """Fewer calibration groups than this warn at fit (coverage of new days is then
@@ -112,11 +134,7 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
         tr = rest[~val] if (~val).any() else rest
         xs_f, ys_f, phys = xs, ys, None
         if post is not None:  # this fold's own posterior and discrepancy
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                phys = physics.calibrated(good.iloc[rest], int(seeds[f]) % 2**32, traces,
-                                          sign_vehicle=post.reference_vehicle,
-                                          n_steps=FOLD_POSTERIOR_STEPS)
+            phys = _fold_physics(physics, good.iloc[rest], int(seeds[f]) % 2**32, traces)
             table, _ = physics.posterior_table(valid, 0, 0, physics=phys, stats=stats,
                                                fade=None)  # training trips: in the domain
             xs_f, ys_f = _training_arrays(learner, table, e_meas)
@@ -136,6 +154,33 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
     return (nets, fold_physics if post is not None else [],
             CVPlusConformal((e_meas - mu[fold, idx]) / sd[fold, idx], fold))
+
+
+def _fold_physics(physics, trips, seed: int, traces):
+    """A fold's ``(posterior, discrepancy)``: warm start from the full posterior (see module)."""
+    post = physics.posterior_
+    draws = getattr(post, "sampler_draws_", None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        if draws is not None:
+            p0 = warm_start_walkers(draws, int(post.diagnostics["n_walkers"]), seed)
+            out = physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
+                                     n_steps=FOLD_WARM_STEPS, init_walkers=p0)
+            if out[0].diagnostics.get("warm_start"):
+                return out
+        return physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
+                                  n_steps=FOLD_POSTERIOR_STEPS)
+
+
+def fold_diagnostics(fold_physics) -> list[dict]:
+    """Per fold: start (warm or MAP), steps, mean acceptance, tau_max, draws (for ``fit_info_``)."""
+    out = []
+    for post, _ in fold_physics:
+        d = post.diagnostics
+        out.append({"warm_start": bool(d.get("warm_start", False)), "n_steps": d["n_steps"],
+                    "acceptance_mean": d["acceptance_mean"], "tau_max": d["tau_max"],
+                    "n_samples": d["n_samples"]})
+    return out
 
 
 def _training_arrays(learner, table, e_meas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -26,7 +26,7 @@ from hybridev.data.parked import with_parked_minutes
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.calibrate import Calibrator
 from hybridev.learning.components import new_learner, new_physics
-from hybridev.learning.cvplus import fit_cv_plus, warn_calibration
+from hybridev.learning.cvplus import fit_cv_plus, fold_diagnostics, warn_calibration
 from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.features import trip_features
 from hybridev.learning.gate import ResidualGate
@@ -272,6 +272,8 @@ def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
         info["heater"] = heater.to_dict()
     if getattr(model, "gate_", None) is not None:
         info["residual_gate"] = model.gate_.summary()
+    if model.calibrator_.fold_physics_:  # CV+ fold posteriors: warm start, steps, mixing
+        info["cv_fold_posteriors"] = fold_diagnostics(model.calibrator_.fold_physics_)
     if "parked_min" in good.columns:  # parking time (from start_time): what the fit saw
         pk = pd.to_numeric(good["parked_min"], errors="coerce").to_numpy(float)
         info["parking"] = {"n_known": int(np.isfinite(pk).sum()),

@@ -48,6 +48,7 @@ import pandas as pd
 
 from hybridev.learning.residual import hold_distances, hold_inputs
 from hybridev.physics.params import VehicleParams
+from hybridev.physics.trips import append_columns
 
 __all__ = ["FLOOR_MARGIN", "MAX_DROP_M", "distance_hold", "energy_floor_kwh",
            "floor_per_km", "held_feature_table", "interval_columns", "point_columns",
@@ -180,7 +181,7 @@ def point_columns(columns: dict, energy_kwh: np.ndarray, vehicle: VehicleParams,
 def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
                      in_domain: np.ndarray, domain_score: np.ndarray,
                      vehicle: VehicleParams, *, residual: bool = True) -> pd.DataFrame:
-    """``table`` with the point, interval, SoC, domain and confidence columns (in place).
+    """``table`` with the point, interval, SoC, domain and confidence columns (a new table).
 
     ``interval``: a :class:`~hybridev.learning.steps.CalibratedInterval` (after the
     out-of-domain step). Energies and bounds are floored at ``min(E_p, 0)`` (``PureML``:
@@ -198,16 +199,11 @@ def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
     cap = vehicle.battery_capacity_kwh
     s0 = table["soc_initial"].to_numpy(float)
     may_empty = hi >= s0 * cap
-    out = table
-    out["energy_kwh_pred"] = point
-    out["energy_kwh_lo"] = lo
-    out["energy_kwh_hi"] = hi
-    out["soc_final_pred"] = soc_from_energy(s0, point, cap)
-    out["soc_final_lo"] = np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap))
-    out["soc_final_hi"] = soc_from_energy(s0, np.where(may_empty, lo_one, lo), cap)
-    out["in_domain"] = in_domain
-    out["domain_score"] = domain_score
-    out["confidence"] = confidence
     scale = np.maximum(np.abs(point), 0.05 * table["distance_km"].to_numpy(float))
-    out["confidence_rel"] = confidence / scale
-    return out
+    return append_columns(table, {  # one concat: column inserts dominate on small tables
+        "energy_kwh_pred": point, "energy_kwh_lo": lo, "energy_kwh_hi": hi,
+        "soc_final_pred": soc_from_energy(s0, point, cap),
+        "soc_final_lo": np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap)),
+        "soc_final_hi": soc_from_energy(s0, np.where(may_empty, lo_one, lo), cap),
+        "in_domain": np.asarray(in_domain), "domain_score": np.asarray(domain_score),
+        "confidence": np.asarray(confidence), "confidence_rel": confidence / scale})

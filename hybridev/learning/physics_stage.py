@@ -139,15 +139,19 @@ class PhysicsStage:
         return self
 
     def calibrated(self, measured: pd.DataFrame, seed: int, traces=None, *,
-                   sign_vehicle=None, n_steps: int | None = None):
-        """Posterior (thinned to :data:`KEEP_POSTERIOR_DRAWS`) and discrepancy on ``measured``."""
+                   sign_vehicle=None, n_steps: int | None = None, init_walkers=None):
+        """Posterior (thinned to :data:`KEEP_POSTERIOR_DRAWS`) and discrepancy on ``measured``.
+
+        ``sign_vehicle``, ``n_steps``, ``init_walkers``: as
+        :func:`~hybridev.bayes.sampler.calibrate_physics` (a CV+ fold's warm start).
+        """
         mode = self.missing_mode
         if isinstance(mode, str) and mode == "infer" and measured["mode"].notna().all():
             mode = "marginalize"  # nothing to infer from: every trip is labelled
         post = calibrate_physics(
             measured, self.vehicle(), params=self.physics_params, seed=int(seed),
             missing_mode=mode, timeseries=traces, n_steps=n_steps, sign_vehicle=sign_vehicle,
-            trace_steps=self.n_steps, trace_seed=self.physics_seed)
+            trace_steps=self.n_steps, trace_seed=self.physics_seed, init_walkers=init_walkers)
         # Keep at most KEEP_POSTERIOR_DRAWS evenly spaced draws, rounded to float32,
         # so that the saved model stays small and loads to exactly this posterior.
         keep = np.unique(np.linspace(0, len(post.samples) - 1,
