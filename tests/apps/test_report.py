@@ -455,3 +455,14 @@ def test_report_lists_outlier_trips_with_their_reasons(run):
         row = re.search(f"<tr>.*?{trip}.*?</tr>", section, re.S).group(0)
         assert reason in row
     assert "t003" not in section
+
+
+def test_report_shows_the_gate_evidence(run):
+    from hybridev.apps.report.quality import gate_note
+
+    g = run["summary"]["hybrid"]["fit_info"]["residual_gate"]
+    assert 0.0 <= g["weight"] <= 1.0
+    page = (run["out"] / "report.html").read_text()
+    assert f"keeps {100 * g['weight']:.0f} % of the networks' correction" in page
+    assert f"{g['mape_physics']:.2f} % for the physics part" in page
+    assert gate_note({"hybrid": {"fit_info": {}}}) == ""

@@ -18,7 +18,7 @@ import pandas as pd
 
 from hybridev.apps.report import figures as F
 from hybridev.apps.report import tables as T
-from hybridev.apps.report.quality import quality_section
+from hybridev.apps.report.quality import gate_note, quality_section
 from hybridev.apps.report.scoring import jsonable
 from hybridev.core.outputs import output_dir
 
@@ -200,6 +200,7 @@ below). Physics on {traces}. Split: {sp["n_train"]} training / {sp["n_test"]} he
 trips{groups}. Seed {s["config"]["seed"]}, main level {T.level_text(s["level"])}.</p>
 {T.table(T.accuracy_table(s, pred))}
 {_network_note(s)}
+{gate_note(s)}
 <p class="note">MAPE: mean absolute percentage error of the point predictions; bias: their mean
 signed error (positive: over-predicted). The nominal physics (the car as specified) and the
 hybrid's physics part have no interval of their own.</p>

@@ -17,7 +17,7 @@ from hybridev.apps.report.tables import num, table
 from hybridev.data.quality import data_quality
 from hybridev.learning.fit_notes import outlier_notes, quality_notes
 
-__all__ = ["data_notes", "outlier_table", "quality_section"]
+__all__ = ["data_notes", "gate_note", "outlier_table", "quality_section"]
 
 
 def data_notes(measured, posterior) -> dict:
@@ -61,3 +61,19 @@ def quality_section(s: dict) -> str:
         parts.append("<p class='note'>No training trip is an outlier of the calibrated "
                      "physics.</p>")
     return "\n".join(parts)
+
+
+def gate_note(s: dict) -> str:
+    """One sentence on the stacking gate: the share of the networks' correction the hybrid
+    keeps and the out-of-fold evidence behind it (``fit_info_["residual_gate"]``)."""
+    g = ((s.get("hybrid") or {}).get("fit_info") or {}).get("residual_gate")
+    if not g or "mape_physics" not in g:
+        return ""
+    where = {"cv+": "the CV+ folds' predictions of their held-out days",
+             "split": "the held-out calibration trips",
+             "validation": "the early-stopping trips"}.get(g["source"], g["source"])
+    return (f"<p class='note'>Stacking gate: the hybrid keeps {100 * g['weight']:.0f} % of the "
+            f"networks' correction, chosen on {where} ({g['n_trips']} trips): out-of-fold MAPE "
+            f"{g['mape_physics']:.2f} % for the physics part, {g['mape_hybrid']:.2f} % with the "
+            f"whole correction, {g['mape_gated']:.2f} % as kept (a correction that does not "
+            "beat the physics out of fold by more than its noise is dropped).</p>")
