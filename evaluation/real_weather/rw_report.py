@@ -226,7 +226,7 @@ def write(out: Path, result: dict, cv: dict, m, extra, post) -> None:
     nop = ", ".join(f"{k} {np.mean([f[k] for f in nps]):.3g}" for k in nps[0])
     tw_names = ("rolling", "aero", "linear drag", "inertia+grade", "regen rolling",
                 "regen aero", "regen linear", "regen inertia+grade", "auxiliary",
-                "heating", "mode aux", "warm-up", "cooling", "drive loss")
+                "heating", "mode aux", "warm-up", "cooling", "drive loss", "regen at limit")
     tw_mean = np.mean(result["discrepancy_term_weights_by_fold"], axis=0)
     tw = ", ".join(f"{n} {w:.2f}" for n, w in zip(tw_names, tw_mean, strict=True)
                    if abs(w - 1.0) > 1e-9)
