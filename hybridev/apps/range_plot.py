@@ -158,9 +158,7 @@ def plot_soc_fan(fan: pd.DataFrame, *, soc_reserve: float | None = None, ranges=
         fig = ax.figure
     d = fan["distance_km"].to_numpy(float)
     q05, q25, q50, q75, q95 = (fan[c].to_numpy(float) for c in cols[1:])
-    ax.fill_between(d, q05, q95, color="tab:blue", alpha=0.2, lw=0, label="90 % band")
-    ax.fill_between(d, q25, q75, color="tab:blue", alpha=0.4, lw=0, label="50 % band")
-    ax.plot(d, q50, color="tab:blue", lw=1.8, label="median")
+    draw_fan_bands(ax, d, (q05, q25, q50, q75, q95))
     if soc_reserve is not None:
         ax.axhline(float(soc_reserve), color="tab:red", ls="--", lw=1, label="reserve")
     if ranges is not None:
@@ -170,11 +168,30 @@ def plot_soc_fan(fan: pd.DataFrame, *, soc_reserve: float | None = None, ranges=
             label = ("range " + " / ".join(marks) + " = "
                      + " / ".join(f"{v:.0f}" for v in marks.values()) + " km")
             ax.axvline(val, color="0.2", ls=":", lw=1, label=None if i else label)
-    ax.set_xlim(float(d.min()), float(d.max()))
+    finish_fan_axes(ax, d, q95, "distance driven (km)", title)
+    return fig
+
+
+def draw_fan_bands(ax, distance_km, quantiles) -> None:
+    """The 90 % and 50 % SoC bands and the median on ``ax``.
+
+    ``quantiles``: the 5th, 25th, 50th, 75th and 95th percentiles of SoC, each shape
+    (n_points,), along ``distance_km`` (n_points,), km (:data:`FAN_QUANTILES`).
+    """
+    q05, q25, q50, q75, q95 = quantiles
+    ax.fill_between(distance_km, q05, q95, color="tab:blue", alpha=0.2, lw=0,
+                    label="90 % band")
+    ax.fill_between(distance_km, q25, q75, color="tab:blue", alpha=0.4, lw=0,
+                    label="50 % band")
+    ax.plot(distance_km, q50, color="tab:blue", lw=1.8, label="median")
+
+
+def finish_fan_axes(ax, distance_km, q95, xlabel: str, title=None) -> None:
+    """Limits (SoC from 0 to at least 1), labels, title and legend of a SoC fan."""
+    ax.set_xlim(float(np.min(distance_km)), float(np.max(distance_km)))
     ax.set_ylim(0.0, max(1.0, float(np.max(q95))))
-    ax.set_xlabel("distance driven (km)")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("state of charge")
     if title:
         ax.set_title(title)
     ax.legend(loc="upper right", fontsize=8)
-    return fig

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybridev.apps.range import quantile_column
+from hybridev.apps.range_plot import draw_fan_bands, finish_fan_axes
 from hybridev.apps.route import FAN_QUANTILES, RouteForecast
 
 __all__ = ["plot_route_fan"]
@@ -53,16 +54,8 @@ def plot_route_fan(forecast: RouteForecast, *, ax=None, title: str | None = None
     alt.tick_params(axis="y", colors="0.45")
     ax.set_zorder(alt.get_zorder() + 1)
     ax.patch.set_visible(False)
-    ax.fill_between(d, q05, q95, color="tab:blue", alpha=0.2, lw=0, label="90 % band")
-    ax.fill_between(d, q25, q75, color="tab:blue", alpha=0.4, lw=0, label="50 % band")
-    ax.plot(d, q50, color="tab:blue", lw=1.8, label="median")
+    draw_fan_bands(ax, d, (q05, q25, q50, q75, q95))
     ax.axhline(forecast.soc_reserve, color="tab:red", ls="--", lw=1,
                label=f"reserve (P below on arrival {forecast.total['p_below_reserve']:.3f})")
-    ax.set_xlim(float(d.min()), float(d.max()))
-    ax.set_ylim(0.0, max(1.0, float(np.max(q95))))
-    ax.set_xlabel("distance along the route (km)")
-    ax.set_ylabel("state of charge")
-    if title:
-        ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=8)
+    finish_fan_axes(ax, d, q95, "distance along the route (km)", title)
     return fig
