@@ -24,6 +24,7 @@ from hybridev.data.timeseries import (
     REJECTED_COLUMNS,
     validate_timeseries,
 )
+from hybridev.data.units import miles_warning
 from hybridev.physics.params import VehicleParams
 from hybridev.physics.traces import LoggedTraces
 
@@ -347,6 +348,8 @@ def measured_from_frames(trips: pd.DataFrame, timeseries: pd.DataFrame | None = 
         keep = good["trip_id"].isin(traces.trip_id).to_numpy()
         traces = traces.select(good["trip_id"].to_numpy(object)[keep])
         match_traces(good, traces)
+    if traces is None:  # nothing says in which unit the table's distances are
+        miles_warning(good, vehicle, stacklevel=3)
     derived = None
     if missing is not None:
         have = good[[c for c in _DERIVABLE if c in good.columns]].notna()

@@ -285,8 +285,10 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     sample grades, exactly as :mod:`hybridev.physics.forces` does for constant ``dt``.
     A coarse log's hidden stop-and-go (``traces.hidden_pke_j_per_kg``, from
     :mod:`hybridev.data.timeseries`) adds ``m x hidden`` to the inertial energy
-    of the driving intervals and as much to that of the braking ones
-    (``rest_pos``, ``rest_neg``): it costs ``(mult / eta_d - eta_r) m x hidden``.
+    of the driving intervals and, less the share of the trip's visible braking
+    energy beyond the regen limit (:func:`_capped_share`), to that of the
+    braking ones (``rest_pos``, ``rest_neg``): it costs
+    ``(mult / eta_d - eta_r (1 - share)) m x hidden``.
 
     Parameters
     ----------
@@ -327,6 +329,7 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     cap_kw, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], soc, n)
     neg = ~pos
     capped_s = np.zeros(n)
+    capped = np.zeros(len(dt), dtype=bool)
     if np.isfinite(thr).any():  # braking energy beyond the limit over the interval
         capped = neg & (pw_kwh * _J_PER_KWH < -thr[trip] * dt)
         neg &= ~capped
@@ -335,8 +338,8 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     sn = [np.bincount(trip, np.where(neg, c, 0.0), minlength=n) for c in comps]
     if traces.hidden_pke_j_per_kg is not None:  # stop-and-go a coarse log hides: spent in
         hid = veh.mass_kg * traces.hidden_pke_j_per_kg / _J_PER_KWH  # traction, regenerated
-        sp[3] = sp[3] + hid
-        sn[3] = sn[3] - hid
+        sp[3] = sp[3] + hid  # as the trip's visible braking is, up to the regen limit
+        sn[3] = sn[3] - hid * (1.0 - _capped_share(pw_kwh, capped, thr, trip, dt, n))
     if temperature_c is None:
         temperature_c = (traces.per_trip_mean(traces.temperature_c)
                          if traces.temperature_c is not None else 20.0)
@@ -352,6 +355,23 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
                      parked_s=None if parked_s is None else np.broadcast_to(
                          np.asarray(parked_s, float), (n,)), heating_grid_kw=grid,
                      regen_cap_kw=cap_kw, capped_s=capped_s)
+
+
+def _capped_share(pw_kwh, capped, thr, trip, dt, n: int) -> np.ndarray:
+    """Share of each trip's braking wheel energy beyond the regen limit, shape (n,).
+
+    ``sum over capped intervals of (-P_w dt - thr dt)`` over ``sum over braking
+    intervals of -P_w dt`` (all at the reference vehicle, like the interval
+    split). The hidden braking of a coarse log is taken to be capped in the
+    same proportion as the trip's visible braking: at a derated limit (a full
+    pack, SoC near 1) the friction brakes take it, as they take the visible one.
+    """
+    if not capped.any():
+        return np.zeros(n)
+    brake = np.bincount(trip, np.where(pw_kwh < 0, -pw_kwh, 0.0), minlength=n)
+    beyond = np.bincount(trip, np.where(capped, -pw_kwh - np.where(capped, thr[trip], 0.0)
+                                        * dt / _J_PER_KWH, 0.0), minlength=n)
+    return np.clip(np.divide(beyond, brake, out=np.zeros(n), where=brake > 0), 0.0, 1.0)
 
 
 def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):

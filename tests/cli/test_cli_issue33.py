@@ -339,3 +339,23 @@ def test_streaming_reports_bad_rows_by_file_row(files, tmp_path, monkeypatch, ca
                       tmp_path / "p.csv"], capsys)
     assert code == 2 and "row 23" in err
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_a_table_in_miles_without_traces_is_flagged(files, tmp_path, monkeypatch, capsys):
+    """Issue 32: without --timeseries, a table in miles is accepted but warned about."""
+    import hybridev.apps.report.build as build
+
+    def stop(*a, **k):  # the check comes before the fit; no need to run it
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(build, "calibration_report", stop)
+    meas = pd.read_csv(files / "measured.csv")
+    meas.assign(distance_km=meas.distance_km / 1.609344,
+                avg_speed_kmh=meas.avg_speed_kmh / 1.609344).to_csv(tmp_path / "mi.csv",
+                                                                    index=False)
+    code, err = _run(["calibrate", tmp_path / "mi.csv", "--out", tmp_path / "rep"], capsys)
+    assert code == 130  # reached the fit: a warning, not an error
+    line = next(s for s in err.splitlines() if "miles?" in s)
+    assert "DataWarning" in line and re.search(r"\d\.\d\dx the nominal physics", line)
+    code, err = _run(["calibrate", files / "measured.csv", "--out", tmp_path / "rep2"], capsys)
+    assert code == 130 and "miles?" not in err
