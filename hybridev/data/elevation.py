@@ -11,12 +11,17 @@ the motor (at ``1 / eta_d``) and taken back by the brakes (at ``eta_r`` at
 most), a loss of ``(1 / eta_d - eta_r)`` per joule. The hidden positive
 kinetic energy is estimated per trip from the speed variation between its own
 samples (:func:`hidden_pke`): the positive kinetic energy per kg,
-``PKE(d) = sum max(v_{i+1}^2 - v_i^2, 0) / 2``, is computed at the logged
-interval ``D`` and at ``2 D`` (every other sample, both phases averaged); what
-the last doubling hid, ``PKE(D) - PKE(2 D)``, is taken to repeat for every
-halving of the interval down to the physics' reference resolution of 1 s:
-``hidden = (PKE(D) - PKE(2 D)) log2(D / 1 s)`` (scale-free speed
-fluctuations; no constant is fitted). It is an estimate, and
+``PKE(d) = sum max(v_{i+k}^2 - v_i^2, 0) / 2`` for ``d = k D``, is computed at
+the logged interval ``D`` and at ``2 D`` and ``3 D`` (every k-th sample, the
+``k`` phases averaged). Speed fluctuations are taken to be scale-free, so that
+each halving of the interval reveals the same positive kinetic energy: ``PKE(d)``
+is linear in ``log2 d``. Its slope is fitted by least squares over the three
+scales and extrapolated from ``D`` down to the physics' reference resolution
+of 1 s: ``hidden = -slope x log2(D / 1 s)`` (no constant is fitted). Three
+scales rather than the two of a first difference ``PKE(D) - PKE(2 D)`` make the
+per-trip slope less noisy. The braking part of the
+hidden energy is recovered as the trip's visible braking is, up to the
+regenerative limit (:func:`hybridev.physics.stats_build.stats_from_logs`). It is an estimate, and
 ``evaluation/hilly_logs`` measures what it brings; the calibration and the
 learned trace gap absorb what it misses. The statistics add it as inertial energy
 (:func:`hybridev.physics.stats_build.stats_from_logs`).
@@ -26,7 +31,8 @@ noisy, so it is never differenced sample to sample. Two steps, both documented
 filters:
 
 1. *Despiking* (a Hampel-type filter): each sample is compared with the median
-   of its 4 neighbours (two on each side, same trip); a sample more than
+   of its 4 neighbours (two on each side, same trip; at a trip's first or last
+   two samples the 4 nearest other samples); a sample more than
    :data:`SPIKE_M` metres from it is replaced by that median. On a road of
    constant grade the median equals the sample, so real grades are
    untouched; single GPS outliers are removed.
@@ -68,6 +74,10 @@ SPIKE_M = 10.0
 """Metres by which a sample must differ from the median of its 4 neighbours to count as a
 spike (GPS altitude noise is a few metres; a real road changes less between samples)."""
 
+_PKE_SCALES = (1, 2, 3)
+"""Multiples of the logged interval at which :func:`hidden_pke` measures the positive
+kinetic energy (its slope against ``log2`` of the interval is fitted over them)."""
+
 GRADE_MIN_SAMPLES = 2
 """Least number of samples on each side of the elevation-slope window."""
 
@@ -91,8 +101,10 @@ ELEVATION_COLUMNS = ["trip_id", "n_samples", "median_dt_s", "elevation_source", 
 def hidden_pke(code: np.ndarray, t_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
     """Positive kinetic energy per kg hidden between a coarse log's samples, J/kg, per trip.
 
-    See the module docstring: ``(PKE(D) - PKE(2 D)) log2(D / 1 s)`` with ``D``
-    the trip's median sampling interval, clipped at 0; 0 for a trip logged at
+    See the module docstring: ``-slope x log2(D / 1 s)`` with ``slope`` the
+    least-squares slope of ``PKE(k D)`` against ``log2 k`` over ``k`` in
+    ``_PKE_SCALES`` and ``D`` the trip's median sampling interval, clipped
+    at 0; 0 for a trip logged at
     :data:`COARSE_SAMPLING_S` or finer.
 
     Parameters
@@ -109,21 +121,24 @@ def hidden_pke(code: np.ndarray, t_s: np.ndarray, speed_mps: np.ndarray) -> np.n
     --------
     >>> v = np.array([0.0, 10.0, 0.0, 10.0, 0.0, 10.0, 0.0, 10.0, 0.0])  # stop-and-go at 5 s
     >>> hidden_pke(np.zeros(9, int), 5.0 * np.arange(9), v).round(1).tolist()
-    [464.4]
+    [246.1]
     """
     n = int(code.max()) + 1 if len(code) else 0
-    same1 = code[1:] == code[:-1]
     e2 = speed_mps * speed_mps * 0.5
-    p1 = np.bincount(code[:-1], np.where(same1, np.maximum(np.diff(e2), 0.0), 0.0),
-                     minlength=n)
-    same2 = code[2:] == code[:-2]
-    p2 = 0.5 * np.bincount(code[:-2], np.where(same2, np.maximum(e2[2:] - e2[:-2], 0.0), 0.0),
-                           minlength=n)
+    pke = []
+    for k in _PKE_SCALES:  # PKE(k D), averaged over the k phases
+        same = code[k:] == code[:-k]
+        pke.append(np.bincount(code[:-k], np.where(same, np.maximum(e2[k:] - e2[:-k], 0.0),
+                                                   0.0), minlength=n) / k)
+    x = np.log2(np.asarray(_PKE_SCALES, float))
+    w = (x - x.mean()) / ((x - x.mean()) ** 2).sum()  # least-squares slope weights
+    slope = sum(wk * pk for wk, pk in zip(w, pke, strict=True))  # dPKE / dlog2(d), J/kg
+    same1 = code[1:] == code[:-1]
     dt = pd.Series(np.diff(t_s)[same1]).groupby(code[:-1][same1]).median()
     d = dt.reindex(np.arange(n)).to_numpy(float)
     coarse = np.isfinite(d) & (d > COARSE_SAMPLING_S)
     octaves = np.log2(np.where(coarse, d, 1.0))
-    return np.where(coarse, np.maximum(p1 - p2, 0.0) * octaves, 0.0)
+    return np.where(coarse, np.maximum(-slope, 0.0) * octaves, 0.0)
 
 
 def _despike(code: np.ndarray, elev_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -132,7 +147,12 @@ def _despike(code: np.ndarray, elev_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     i = np.arange(n)
     lo = np.searchsorted(code, code, side="left")
     hi = np.searchsorted(code, code, side="right") - 1
-    idx = np.clip(i[:, None] + np.array([-2, -1, 1, 2])[None, :], lo[:, None], hi[:, None])
+    # the 4 nearest other samples of the trip: 2 on each side, shifted inwards at its ends
+    # (never the sample itself, whose spike would otherwise enter the median it is judged by)
+    first = np.clip(i - 2, lo, np.maximum(hi - 4, lo))
+    idx = first[:, None] + np.arange(5)[None, :]
+    idx = np.where(idx >= i[:, None], idx + 1, idx)[:, :4]
+    idx = np.clip(idx, lo[:, None], hi[:, None])
     med = np.median(elev_m[idx], axis=1)
     spike = np.abs(elev_m - med) > SPIKE_M
     return np.where(spike, med, elev_m), spike

@@ -15,7 +15,8 @@ once with the columns as given and once read as miles and mph (times
   lower speeds' smaller aerodynamic losses),
 * read as miles, most trips (:data:`MILES_SHARE_MIN`) are each closer to
   their nominal physics (ratio nearer 1 in log terms) than as given, and so
-  is the median ratio.
+  is the median ratio, which then lies within a factor :data:`MILES_RATIO_MIN`
+  of 1 (a table 19 times above its physics is wrong, but not by a unit).
 
 It warns (:class:`~hybridev.core.errors.DataWarning`), never fails: a car with
 a wrong vehicle description can look the same, and the message says so.
@@ -121,7 +122,7 @@ def miles_warning(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
         return None
     r_km, share, r_mi = r
     if not (r_km >= MILES_RATIO_MIN and share >= MILES_SHARE_MIN
-            and abs(np.log(r_mi)) < abs(np.log(r_km))):
+            and abs(np.log(r_mi)) < min(abs(np.log(r_km)), np.log(MILES_RATIO_MIN))):
         return None
     msg = (f"the measured energy per km is {r_km:.2f}x the nominal physics of the vehicle "
            f"(median ratio {r_km:.3g}), and {r_mi:.3g}x with distance_km and avg_speed_kmh "

@@ -35,6 +35,10 @@ from hybridev.physics.trips import _blocks, _check_seed
 __all__ = ["parked_seconds", "stats_from_logs", "stats_from_traces", "trip_stats"]
 
 
+_RAMP_STEP_S = 1.0
+"""Longest step (s) at which the wheel power of a logged trace is evaluated: a coarser
+log's straight speed ramps are evaluated every second (:meth:`LoggedTraces.refined`)."""
+
 _SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 cache)
 
 
@@ -314,6 +318,7 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
         One row per trace.
     """
     veh = vehicle or VehicleParams()
+    traces = traces.refined(_RAMP_STEP_S)  # a coarse log's straight ramps, every second
     start, trip = traces.intervals()
     nxt = start + 1
     dt = traces.t_s[nxt] - traces.t_s[start]

@@ -87,6 +87,56 @@ class LoggedTraces:
         return (np.bincount(trip, xm * dt, minlength=len(self))
                 / np.bincount(trip, dt, minlength=len(self)))
 
+    def refined(self, step_s: float = 1.0) -> LoggedTraces:
+        """The same straight speed ramps, with points every ``step_s`` or less.
+
+        An interval longer than ``1.5 step_s`` gets ``round(dt / step_s) - 1``
+        interior samples, equally spaced, on the straight line between its two
+        samples (speed, grade, temperature and SoC alike); shorter intervals are
+        kept as they are, so a 1 Hz log is returned unchanged (``self``). The
+        physics treats a coarse log as straight ramps of speed between its
+        samples; evaluating the wheel power along the ramp rather than at its
+        mean speed puts the braking power of the ramp's fast end beyond the
+        regen limit where it is (:func:`hybridev.physics.stats_build.stats_from_logs`).
+
+        Parameters
+        ----------
+        step_s : float, s
+
+        Returns
+        -------
+        LoggedTraces
+            ``hidden_pke_j_per_kg`` is carried over (it is per trip).
+
+        Examples
+        --------
+        >>> tr = LoggedTraces(np.array(["a"], object), np.array([0, 3]), np.array([0.0, 5.0, 6.0]),
+        ...                   np.array([0.0, 10.0, 12.0]), np.zeros(3))
+        >>> r = tr.refined()
+        >>> r.t_s.tolist(), r.speed_mps.tolist(), r.offsets.tolist()
+        ([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0], [0, 7])
+        """
+        start, _ = self.intervals()
+        dt = self.t_s[start + 1] - self.t_s[start]
+        k = np.where(dt > 1.5 * step_s, np.maximum(np.rint(dt / step_s), 1.0), 1.0).astype(int)
+        if np.all(k == 1):
+            return self
+        # each sample is followed by k - 1 interior points of the interval it starts
+        reps = np.ones(len(self.t_s), dtype=int)
+        reps[start] = k
+        src = np.repeat(np.arange(len(self.t_s)), reps)
+        first = np.repeat(np.cumsum(reps) - reps, reps)
+        frac = (np.arange(len(src)) - first) / np.repeat(np.where(reps > 0, reps, 1), reps)
+        nxt = np.minimum(src + 1, len(self.t_s) - 1)
+
+        def lerp(a):
+            return None if a is None else a[src] + frac * (a[nxt] - a[src])
+
+        n_new = np.bincount(self.trip_index(), reps, minlength=len(self)).astype(int)
+        return LoggedTraces(self.trip_id, np.concatenate([[0], np.cumsum(n_new)]), lerp(self.t_s),
+                            lerp(self.speed_mps), lerp(self.grade_rad), lerp(self.temperature_c),
+                            lerp(self.soc), self.hidden_pke_j_per_kg)
+
     def select(self, trip_ids) -> LoggedTraces:
         """The traces of ``trip_ids`` in that order (ValueError if one is absent)."""
         ids = np.asarray(trip_ids, dtype=object)

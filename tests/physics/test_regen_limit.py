@@ -119,18 +119,24 @@ def test_logged_statistics_exact_with_irregular_sampling():
     tr = LoggedTraces(np.array(list("abcd"), dtype=object), np.arange(0, n * m + 1, m),
                       t_s.ravel(), v.ravel(), g.ravel())
     s = stats_from_logs(tr, vehicle=CAR, temperature_c=5.0, soc=soc)
+    # intervals longer than 1.5 s are evaluated along their straight ramp, every second
+    fine = tr.refined()
+    assert len(fine.t_s) > len(tr.t_s)
     for i in range(n):  # interval by interval
-        dt = np.diff(t_s[i])
-        pw = np.array([wheel_power_kw(v[i, k:k + 2], dt[k], vehicle=CAR,
-                                      grade_rad=g[i, k:k + 2])[0] for k in range(m - 1)])
+        sl = slice(fine.offsets[i], fine.offsets[i + 1])
+        t_i, v_i, g_i = fine.t_s[sl], fine.speed_mps[sl], fine.grade_rad[sl]
+        m = len(t_i)
+        dt = np.diff(t_i)
+        pw = np.array([wheel_power_kw(v_i[k:k + 2], dt[k], vehicle=CAR,
+                                      grade_rad=g_i[k:k + 2])[0] for k in range(m - 1)])
         assert pw.min() < -20.0
-        e = sum(float(trace_energy_kwh(v[i, k:k + 2], dt[k], vehicle=CAR, temperature_c=5.0,
-                                       grade_rad=g[i, k:k + 2], soc=soc[i]))
+        e = sum(float(trace_energy_kwh(v_i[k:k + 2], dt[k], vehicle=CAR, temperature_c=5.0,
+                                       grade_rad=g_i[k:k + 2], soc=soc[i]))
                 for k in range(m - 1))
         # the warm-up is per trip, not per interval: add it once, remove it m - 2 times
-        single = float(trace_energy_kwh(v[i, :2] * 0, t_s[i, -1] - t_s[i, 0], vehicle=CAR,
+        single = float(trace_energy_kwh(v_i[:2] * 0, t_i[-1] - t_i[0], vehicle=CAR,
                                         temperature_c=5.0))
-        per_int = sum(float(trace_energy_kwh(v[i, :2] * 0, dt[k], vehicle=CAR,
+        per_int = sum(float(trace_energy_kwh(v_i[:2] * 0, dt[k], vehicle=CAR,
                                              temperature_c=5.0)) for k in range(m - 1))
         assert energy_from_stats(s)[i] == pytest.approx(e - per_int + single, rel=1e-9)
 

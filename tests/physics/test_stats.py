@@ -1,6 +1,7 @@
 """Sufficient statistics of the physics (hybridev.physics.stats)."""
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -93,20 +94,30 @@ def test_logged_variable_dt_matches_interval_by_interval_physics():
     # no warm-up: the reference below splits the trip into one-interval trips
     veh = dataclasses.replace(COASTDOWN, cabin_heat_capacity_kj_per_k=0.0)
     s = stats_from_logs(tr, vehicle=veh, profile="aggressive", temperature_c=[30.0])
-    # reference: each interval as its own 2-sample trace with its own dt
-    pairs = np.stack([tr.speed_mps[:-1], tr.speed_mps[1:]], axis=1)
-    grades = np.stack([tr.grade_rad[:-1], tr.grade_rad[1:]], axis=1)
-    ref = trace_energy_kwh(pairs, np.diff(tr.t_s), vehicle=veh, profile="aggressive",
+    # reference: each interval as its own 2-sample trace with its own dt; the 2 s and 5 s
+    # intervals are evaluated along their straight ramps every second (LoggedTraces.refined)
+    fine = tr.refined()
+    assert len(fine.t_s) > len(tr.t_s) and np.diff(fine.t_s).max() <= 1.0 + 1e-9
+    pairs = np.stack([fine.speed_mps[:-1], fine.speed_mps[1:]], axis=1)
+    grades = np.stack([fine.grade_rad[:-1], fine.grade_rad[1:]], axis=1)
+    ref = trace_energy_kwh(pairs, np.diff(fine.t_s), vehicle=veh, profile="aggressive",
                            temperature_c=30.0, grade_rad=grades).sum()
     assert energy_from_stats(s)[0] == pytest.approx(ref, rel=1e-9)
 
 
-def test_logged_uniform_equals_array_statistics():
-    v, dt = np.array([[0.0, 3.0, 8.0, 8.0, 4.0, 0.0, 0.0, 2.0]]), 2.0
+@pytest.mark.parametrize("dt", [1.0, 2.0])
+def test_logged_uniform_equals_array_statistics(dt):
+    v = np.array([[0.0, 3.0, 8.0, 8.0, 4.0, 0.0, 0.0, 2.0]])
     ts = pd.DataFrame({"trip_id": "a", "t_s": np.arange(8) * dt, "speed_kmh": v[0] * 3.6})
-    tr, _ = validate_timeseries(ts, min_samples=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 2 s is a coarse log
+        tr, _ = validate_timeseries(ts, min_samples=2)
+    tr = dataclasses.replace(tr, hidden_pke_j_per_kg=None)  # the ramps alone
     a = stats_from_logs(tr, profile="eco", temperature_c=[5.0])
-    b = stats_from_traces(v, [dt], profile="eco", temperature_c=[5.0])
+    # a 2 s log is evaluated along its straight ramps every second
+    t1 = np.arange(0.0, 7 * dt + 0.5, 1.0)
+    b = stats_from_traces(np.interp(t1, np.arange(8) * dt, v[0])[None, :], [1.0],
+                          profile="eco", temperature_c=[5.0])
     for f in ("roll_pos", "aero_neg", "rest_pos", "rest_neg", "duration_h", "hvac_kw"):
         assert getattr(a, f) == pytest.approx(getattr(b, f), rel=1e-12)
 
