@@ -203,7 +203,12 @@ class VehicleParams:
     cold_regen_loss_per_k : float
         Loss of regenerative braking per kelvin below ``cold_ref_c``
         (fraction, capped at 0.8): the battery management limits charge
-        current into a cold pack. 0.01/K: -27 % at -7 degC.
+        current into a cold pack. 0.01/K: -27 % at -7 degC. Owners report
+        regeneration "constrained until the battery warms up" below about
+        10 °C (electriclifeblog, "Cooling off", 2016) and "temporarily
+        reduced" at 3 °C (willemsplanet.com, 2021-12-17); no published
+        curve of the limit against temperature was found, so the linear
+        form is an assumption the calibration's ``regen_scale`` absorbs.
     cold_ref_c : float
         Temperature below which the cold losses start, degC.
     regen_max_kw : float or None
@@ -220,7 +225,10 @@ class VehicleParams:
     regen_derate_soc : float
         State of charge above which the limit shrinks linearly, to zero at
         SoC 1 (a nearly full pack cannot take charge; cars show "regen
-        limited"). 0.9 by default. Applied per trip from its starting SoC
+        limited"). 0.9 by default: owners report the limit from about 80 %
+        (a car that shows "Regenerative braking temporarily reduced" until
+        its pack is "around 75 °F (24°C)" and "below say, 80%", willemsplanet.com,
+        2021-12-17) to about 93 % (Tesla forums, "Limited Regen", 2019). Applied per trip from its starting SoC
         (``soc_initial``, or the first logged ``soc``) when known, and only to
         a finite ``regen_max_kw``.
     road_load_source : {"datasheet", "coastdown"}
@@ -444,19 +452,33 @@ factor ~2 either way)."""
 COMPACT_BEV_REGEN_MAX_KW = 50.0
 """Regenerative power limit of a compact BEV, kW (battery side).
 
-The battery management limits regeneration by the pack's charge current, the
-same limit that sets its peak DC charging power; compact BEVs of 40-60 kWh
-are specified at about 46-55 kW peak DC charge (Nissan Leaf 40 kWh: 50 kW
-CHAdeMO; Chevrolet Bolt EV: 55 kW; Renault Zoe ZE50: 50 kW; manufacturers'
-specification sheets), and their one-pedal regeneration decelerates at about
-0.1-0.2 g, e.g. 1800 kg x 0.15 g x 50 km/h = 37 kW at the wheels. Owner
-manuals state that this maximum is reduced when the pack is full or very
-cold or hot (e.g. Jaguar I-PACE owner information, "Regenerative braking":
-"the maximum level of regenerated energy may be temporarily reduced ... when
-the high voltage battery is fully charged or driving ... in very high or low
-ambient temperatures"), which :class:`VehicleParams` models with
-``regen_derate_soc`` and the cold regen factor. 50 kW is the centre of that
-range; set ``regen_max_kw`` from the car's data sheet if it says."""
+Published figures span about 30 kW to more than 100 kW:
+
+* Volkswagen ID.3 (manufacturer): it "can brake purely electrically up to a
+  deceleration rate of about 0.3 g. This corresponds to a recuperation power
+  of more than 100 kW" (Volkswagen newsroom, "Brake energy recuperation for
+  efficient driving",
+  https://www.volkswagen-newsroom.com/en/brake-energy-recuperation-for-efficient-driving-15446);
+* a compact BEV of 2016 (owner's report): "Maximum regen is 30kW", constrained
+  further while the battery is cold (electriclifeblog, "Cooling off", 2016,
+  https://electriclifeblog.wordpress.com/2016/10/14/cooling-off/);
+* Tesla owners estimate regeneration peaks at "around 60kw but normally lower",
+  limited above about 93 % SoC and at low temperatures (Tesla forums, "Limited
+  Regen", 2019, https://forums.tesla.com/nl_BE/node/168840).
+
+No measured or manufacturer figure was found for the Nissan Leaf, Renault Zoe
+or Hyundai Kona; their peak DC charging power (about 50-100 kW), which the
+same battery current limit sets, is consistent with the range above. 50 kW is
+in its lower half: about the 0.15 g of one-pedal driving at 50 km/h for an
+1800 kg car (1800 kg x 0.15 g x 13.9 m/s = 37 kW at the wheels). Owner manuals
+state that the limit falls when the pack is full or cold or hot (Jaguar I-PACE
+owner information, "Regenerative braking": "the maximum level of regenerated
+energy may be temporarily reduced ... when the high voltage battery is fully
+charged or driving ... in very high or low ambient temperatures",
+https://www.ownerinfo.jaguar.com/document/4K/2019/T32090/29962_en_GBR/proc/G2174091;
+Polestar 2 manual, "Power meter": "regeneration to the battery is limited"),
+which :class:`VehicleParams` models with ``regen_derate_soc`` and the cold
+regen factor. Set ``regen_max_kw`` from the car's data sheet if it says."""
 
 
 @dataclass(frozen=True)
