@@ -44,6 +44,7 @@ MILES_SHARE_MIN = 0.6
 """Share of trips that must each be closer to nominal when read as miles."""
 
 _MIN_TRIPS = 3
+_MAX_TRIPS = 500
 _NEEDED = ("distance_km", "avg_speed_kmh", "energy_kwh")
 
 
@@ -62,7 +63,8 @@ def miles_ratio(trips: pd.DataFrame, vehicle: VehicleParams | None = None
     Returns
     -------
     (median ratio as given, share of trips closer to 1 read as miles, median
-    ratio read as miles), or None when fewer than 3 usable trips.
+    ratio read as miles), or None when fewer than 3 usable trips. Of a larger
+    table, 500 evenly spaced rows are checked.
     """
     if not all(c in trips.columns for c in _NEEDED):
         return None
@@ -71,6 +73,8 @@ def miles_ratio(trips: pd.DataFrame, vehicle: VehicleParams | None = None
           & (t["distance_km"] > 0) & (t["avg_speed_kmh"] > 0)]
     if len(t) < _MIN_TRIPS:
         return None
+    if len(t) > _MAX_TRIPS:  # a check, not a fit: evenly spaced rows suffice
+        t = t.iloc[np.unique(np.linspace(0, len(t) - 1, _MAX_TRIPS).astype(int))]
     from hybridev.physics.stats import energy_from_stats
     from hybridev.physics.stats_build import trip_stats
 
