@@ -15,12 +15,16 @@ quantity                  from                          tolerance ``tol_f``
 ========================  ===========================  =====================
 
 A new trip's gap in each quantity is the distance to the *nearest* training
-value, in units of the tolerance (beyond the training range, in units of a
-third of it, :data:`EDGE_FRACTION`: extrapolation is riskier); its ``domain_score`` is the largest gap over
-the *intensive* quantities (:data:`INTENSIVE_QUANTITIES`: temperature, speed,
-grade), so both a value outside the training range and one inside a
-wide gap of it count (the paper's synthetic design has only -5, 20 and 32 degC:
-a trip at 3 degC is 8 degC from any training trip, score 2.7). A trip is
+value, in units of the tolerance ``tol_f``. Beyond the training range it counts
+against a third of it (:data:`EDGE_FRACTION`: extrapolation is riskier). Between
+two training values of an *intensive* quantity the gap is 0: the condition is
+interpolated between familiar ones (the paper's synthetic design has only -5, 20
+and 32 degC, and a trip at 3 degC lies between two logged temperatures: the
+physics is continuous in temperature and the networks interpolate between them;
+``evaluation/range_bands`` measures the bands there against the truth). The
+extensive quantities keep the distance to the nearest value (recorded, not
+scored). A trip's ``domain_score`` is the largest gap over the intensive
+quantities (:data:`INTENSIVE_QUANTITIES`: temperature, speed, grade); it is
 ``in_domain`` when its score is at most 1. The tolerances are physical scales
 (a few degC of cabin/battery climate, a speed band, half again the distance),
 the same for every car.
@@ -174,8 +178,8 @@ class TrainingDomain:
     >>> dom = TrainingDomain.fit(t, np.zeros((6, 2)))
     >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
     >>> score, ok = dom.score(new)
-    >>> score.round(2).tolist(), ok.tolist()
-    ([0.33, 2.67, 13.0], [True, False, False])
+    >>> score.round(2).tolist(), ok.tolist()  # 3 degC lies between -5 and 20 degC
+    ([0.0, 0.0, 13.0], [True, True, False])
     """
 
     values: tuple
@@ -208,7 +212,7 @@ class TrainingDomain:
         ...     "avg_speed_kmh": [50.0, 60.0], "temperature_c": [20.0, 22.0]}), np.zeros((2, 1)))
         >>> d.gap(pd.DataFrame({"distance_km": [400.0, 15.0], "avg_speed_kmh": [55.0, 55.0],
         ...     "temperature_c": [21.0, 14.0]})).round(2).tolist()
-        [0.62, 6.0]
+        [0.0, 6.0]
         """
         return _intensive_max(self.gaps(table, traces))
 
@@ -221,7 +225,8 @@ class TrainingDomain:
             above = vals[np.clip(i, 0, len(vals) - 1)]
             near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
             outside = np.maximum(vals[0] - q[:, j], q[:, j] - vals[-1])  # > 0 beyond the range
-            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
+            inner = 0.0 if INTENSIVE[j] else near  # interpolated between familiar conditions
+            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), inner)
         return out
 
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
