@@ -229,6 +229,27 @@ class TrainingDomain:
             out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), inner)
         return out
 
+    def interior_gap(self, q: np.ndarray) -> np.ndarray:
+        """Largest interpolation gap over the intensive quantities, (n_trips,).
+
+        For a trip between two training values of an intensive quantity: the
+        distance to the nearest of them over the tolerance (0 beyond the range,
+        which :meth:`gap` scores). It does not leave the domain; a learned rate
+        (:class:`hybridev.learning.shift.GapRate`) widens its interval when the
+        data show that interpolating across such gaps errs more.
+        ``q``: :func:`domain_quantities` (n_trips, 5).
+        """
+        out = np.zeros(len(q))
+        for j in np.flatnonzero(INTENSIVE):
+            vals, tol = self.values[j], DOMAIN_TOLERANCES[j]
+            i = np.searchsorted(vals, q[:, j])
+            below = vals[np.clip(i - 1, 0, len(vals) - 1)]
+            above = vals[np.clip(i, 0, len(vals) - 1)]
+            inside = (q[:, j] >= vals[0]) & (q[:, j] <= vals[-1])
+            near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
+            out = np.maximum(out, np.where(inside, near, 0.0))
+        return out
+
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
         """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
         miss = np.zeros(len(table), dtype=bool)
@@ -320,7 +341,8 @@ class TrainingDomain:
             if warn:
                 warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
         out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
-                               no_mode=no_mode, reasons=reasons, has_trace=has_trace)
+                               no_mode=no_mode, reasons=reasons, has_trace=has_trace,
+                               interp_gap=self.interior_gap(q) if n else np.zeros(0))
         if reasons:  # some trip is out: the gap and inflation of its out-of-domain spread
             out.ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
             out.inflation = self.inflation(out.ood_gap)
