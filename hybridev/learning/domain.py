@@ -15,29 +15,22 @@ quantity                  from                          tolerance ``tol_f``
 ========================  ===========================  =====================
 
 A new trip's gap in each quantity is the distance to the *nearest* training
-value, in units of the tolerance ``tol_f``. Beyond the training range it counts
-against a third of it (:data:`EDGE_FRACTION`: extrapolation is riskier). Between
-two training values of an *intensive* quantity the gap is 0: the condition is
-interpolated between familiar ones (the paper's synthetic design has only -5, 20
-and 32 degC, and a trip at 3 degC lies between two logged temperatures: the
-physics is continuous in temperature and the networks interpolate between them;
-``evaluation/range_bands`` measures the bands there against the truth). The
-extensive quantities keep the distance to the nearest value (recorded, not
-scored). A trip's ``domain_score`` is the largest gap over the intensive
-quantities (:data:`INTENSIVE_QUANTITIES`: temperature, speed, grade); it is
-``in_domain`` when its score is at most 1. The tolerances are physical scales
-(a few degC of cabin/battery climate, a speed band, half again the distance),
-the same for every car.
+value over the tolerance; beyond the training range it counts against a third
+of it (:data:`EDGE_FRACTION`: extrapolation is riskier). Between two training
+values of an intensive quantity the gap is 0: the condition is interpolated
+between familiar ones, not new (a trip at 3 degC between the paper design's -5
+and 20 degC); its distance to the nearest value is the *interpolation gap*
+(:meth:`TrainingDomain.interior_gap`), which widens at a learned rate
+(:class:`hybridev.learning.shift.GapRate`). A trip's ``domain_score`` is the
+largest gap over the intensive quantities (:data:`INTENSIVE_QUANTITIES`); it is
+``in_domain`` when at most 1. The tolerances are physical scales, the same for every car.
 
-Intensive and extensive conditions. Energy adds up over distance: a trip of
-familiar speed, temperature and grade but longer (or shorter) than any
-training trip is a sum of familiar stretches, and the physics carries it
-(the networks' residual is held at the training distances,
-:mod:`hybridev.learning.physical`). So only the intensive quantities
-(temperature, speed, grade) score the domain; the extensive ones (distance,
-duration) are still recorded and their gaps returned by :meth:`TrainingDomain.gaps`,
-but they neither flag a trip nor widen it. (Stop density is not among the
-quantities: a trip summary does not carry it.)
+Intensive and extensive conditions. Energy adds up over distance: a longer trip
+under familiar speed, temperature and grade is a sum of familiar stretches, carried
+by the physics (the residual is held at the training distances,
+:mod:`hybridev.learning.physical`). So only the intensive quantities score the
+domain; the gaps of the extensive ones (distance, duration) are recorded
+(:meth:`TrainingDomain.gaps`) but neither flag a trip nor widen it.
 
 Inputs the model was trained with but a trip lacks also leave the domain
 (score at least :data:`MISSING_INPUT_SCORE`): a driving ``mode`` when every
@@ -46,13 +39,11 @@ calibrated trips predicted without their trace (:mod:`hybridev.learning.planned`
 :func:`hybridev.learning.fitting.fit_planned`: the domain is then recorded with
 ``needs_trace=False``, and a planned trip is in the domain when its conditions are).
 
-Out-of-domain trips get intervals from the physics posterior predictive plus
-an inflation that grows with the score (see :mod:`hybridev.learning.ood`; its
-rate is learned at fit from out-of-fold trips outside their fold's domain,
-:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`), and
-the network inputs of every trip are clipped to their training range
-(:meth:`TrainingDomain.clip_features`), so that the residual does not
-extrapolate: outside the training distances it keeps its boundary value.
+Out-of-domain trips get intervals from the physics posterior predictive plus an
+inflation growing with the score (:mod:`hybridev.learning.ood`; rate learned at fit,
+:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`); every
+trip's network inputs are clipped to their training range
+(:meth:`TrainingDomain.clip_features`): the residual does not extrapolate.
 """
 
 from __future__ import annotations
@@ -216,39 +207,26 @@ class TrainingDomain:
         """
         return _intensive_max(self.gaps(table, traces))
 
-    def _gaps(self, q: np.ndarray) -> np.ndarray:
-        """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5)."""
-        out = np.empty_like(q)
+    def _gaps(self, q: np.ndarray, *, interior: bool = False) -> np.ndarray:
+        """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5); ``interior``:
+        :meth:`interior_gap` instead."""
+        out, inner = np.empty_like(q), np.zeros(len(q))
         for j, (vals, tol) in enumerate(zip(self.values, DOMAIN_TOLERANCES, strict=True)):
             i = np.searchsorted(vals, q[:, j])
             below = vals[np.clip(i - 1, 0, len(vals) - 1)]
             above = vals[np.clip(i, 0, len(vals) - 1)]
             near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
             outside = np.maximum(vals[0] - q[:, j], q[:, j] - vals[-1])  # > 0 beyond the range
-            inner = 0.0 if INTENSIVE[j] else near  # interpolated between familiar conditions
-            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), inner)
-        return out
+            if INTENSIVE[j]:  # between two training values: interpolated, not new
+                inner = np.maximum(inner, np.where(outside > 0, 0.0, near))
+                near = 0.0
+            out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
+        return inner if interior else out
 
     def interior_gap(self, q: np.ndarray) -> np.ndarray:
-        """Largest interpolation gap over the intensive quantities, (n_trips,).
-
-        For a trip between two training values of an intensive quantity: the
-        distance to the nearest of them over the tolerance (0 beyond the range,
-        which :meth:`gap` scores). It does not leave the domain; a learned rate
-        (:class:`hybridev.learning.shift.GapRate`) widens its interval when the
-        data show that interpolating across such gaps errs more.
-        ``q``: :func:`domain_quantities` (n_trips, 5).
-        """
-        out = np.zeros(len(q))
-        for j in np.flatnonzero(INTENSIVE):
-            vals, tol = self.values[j], DOMAIN_TOLERANCES[j]
-            i = np.searchsorted(vals, q[:, j])
-            below = vals[np.clip(i - 1, 0, len(vals) - 1)]
-            above = vals[np.clip(i, 0, len(vals) - 1)]
-            inside = (q[:, j] >= vals[0]) & (q[:, j] <= vals[-1])
-            near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
-            out = np.maximum(out, np.where(inside, near, 0.0))
-        return out
+        """Largest interpolation gap over the intensive quantities, (n_trips,), of the
+        :func:`domain_quantities` ``q`` (n_trips, 5): 0 beyond the training range."""
+        return self._gaps(q, interior=True)
 
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
         """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
