@@ -35,10 +35,12 @@ Set-up (every number in the output comes from this script):
   2. **out-of-domain**: ``make_dataset(N_OOD_TRIPS, truth="structured",
      seed=100 + r)``, the paper's design (temperatures -5, 20 and 32 degC
      only, speeds 40-120 km/h, 20-200 km). The planned weeks' temperatures
-     (range in the output) lie between its temperatures and the errands
-     (12 km at 35 km/h) below its ranges, so the model flags them and widens
-     (:mod:`hybridev.learning.ood`): being conservative is the intended
-     behaviour there. Reported apart, not as the headline.
+     (range in the output) lie mostly between its temperatures: interpolated,
+     in the domain, widened at the model's interpolation rate
+     (:class:`hybridev.learning.shift.GapRate`); the days colder than -5 degC
+     and the errands at 35 km/h lie beyond its conditions, so the model flags
+     them and widens (:mod:`hybridev.learning.ood`). Reported apart, not as
+     the headline.
 
   3. **in-domain, new user**: the history of design 1, but the model set up
      as the README tells a new user to: ``VehicleParams.from_coastdown`` of

@@ -15,25 +15,22 @@ quantity                  from                          tolerance ``tol_f``
 ========================  ===========================  =====================
 
 A new trip's gap in each quantity is the distance to the *nearest* training
-value, in units of the tolerance (beyond the training range, in units of a
-third of it, :data:`EDGE_FRACTION`: extrapolation is riskier); its ``domain_score`` is the largest gap over
-the *intensive* quantities (:data:`INTENSIVE_QUANTITIES`: temperature, speed,
-grade), so both a value outside the training range and one inside a
-wide gap of it count (the paper's synthetic design has only -5, 20 and 32 degC:
-a trip at 3 degC is 8 degC from any training trip, score 2.7). A trip is
-``in_domain`` when its score is at most 1. The tolerances are physical scales
-(a few degC of cabin/battery climate, a speed band, half again the distance),
-the same for every car.
+value over the tolerance; beyond the training range it counts against a third
+of it (:data:`EDGE_FRACTION`: extrapolation is riskier). Between two training
+values of an intensive quantity the gap is 0: the condition is interpolated
+between familiar ones, not new (a trip at 3 degC between the paper design's -5
+and 20 degC); its distance to the nearest value is the *interpolation gap*
+(:meth:`TrainingDomain.interior_gap`), which widens at a learned rate
+(:class:`hybridev.learning.shift.GapRate`). A trip's ``domain_score`` is the
+largest gap over the intensive quantities (:data:`INTENSIVE_QUANTITIES`); it is
+``in_domain`` when at most 1. The tolerances are physical scales, the same for every car.
 
-Intensive and extensive conditions. Energy adds up over distance: a trip of
-familiar speed, temperature and grade but longer (or shorter) than any
-training trip is a sum of familiar stretches, and the physics carries it
-(the networks' residual is held at the training distances,
-:mod:`hybridev.learning.physical`). So only the intensive quantities
-(temperature, speed, grade) score the domain; the extensive ones (distance,
-duration) are still recorded and their gaps returned by :meth:`TrainingDomain.gaps`,
-but they neither flag a trip nor widen it. (Stop density is not among the
-quantities: a trip summary does not carry it.)
+Intensive and extensive conditions. Energy adds up over distance: a longer trip
+under familiar speed, temperature and grade is a sum of familiar stretches, carried
+by the physics (the residual is held at the training distances,
+:mod:`hybridev.learning.physical`). So only the intensive quantities score the
+domain; the gaps of the extensive ones (distance, duration) are recorded
+(:meth:`TrainingDomain.gaps`) but neither flag a trip nor widen it.
 
 Inputs the model was trained with but a trip lacks also leave the domain
 (score at least :data:`MISSING_INPUT_SCORE`): a driving ``mode`` when every
@@ -42,13 +39,11 @@ calibrated trips predicted without their trace (:mod:`hybridev.learning.planned`
 :func:`hybridev.learning.fitting.fit_planned`: the domain is then recorded with
 ``needs_trace=False``, and a planned trip is in the domain when its conditions are).
 
-Out-of-domain trips get intervals from the physics posterior predictive plus
-an inflation that grows with the score (see :mod:`hybridev.learning.ood`; its
-rate is learned at fit from out-of-fold trips outside their fold's domain,
-:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`), and
-the network inputs of every trip are clipped to their training range
-(:meth:`TrainingDomain.clip_features`), so that the residual does not
-extrapolate: outside the training distances it keeps its boundary value.
+Out-of-domain trips get intervals from the physics posterior predictive plus an
+inflation growing with the score (:mod:`hybridev.learning.ood`; rate learned at fit,
+:class:`hybridev.learning.shift.GapRate`, else :data:`OOD_INFLATION_PER_UNIT`); every
+trip's network inputs are clipped to their training range
+(:meth:`TrainingDomain.clip_features`): the residual does not extrapolate.
 """
 
 from __future__ import annotations
@@ -174,8 +169,8 @@ class TrainingDomain:
     >>> dom = TrainingDomain.fit(t, np.zeros((6, 2)))
     >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
     >>> score, ok = dom.score(new)
-    >>> score.round(2).tolist(), ok.tolist()
-    ([0.33, 2.67, 13.0], [True, False, False])
+    >>> score.round(2).tolist(), ok.tolist()  # 3 degC lies between -5 and 20 degC
+    ([0.0, 0.0, 13.0], [True, True, False])
     """
 
     values: tuple
@@ -208,21 +203,30 @@ class TrainingDomain:
         ...     "avg_speed_kmh": [50.0, 60.0], "temperature_c": [20.0, 22.0]}), np.zeros((2, 1)))
         >>> d.gap(pd.DataFrame({"distance_km": [400.0, 15.0], "avg_speed_kmh": [55.0, 55.0],
         ...     "temperature_c": [21.0, 14.0]})).round(2).tolist()
-        [0.62, 6.0]
+        [0.0, 6.0]
         """
         return _intensive_max(self.gaps(table, traces))
 
-    def _gaps(self, q: np.ndarray) -> np.ndarray:
-        """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5)."""
-        out = np.empty_like(q)
+    def _gaps(self, q: np.ndarray, *, interior: bool = False) -> np.ndarray:
+        """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5); ``interior``:
+        :meth:`interior_gap` instead."""
+        out, inner = np.empty_like(q), np.zeros(len(q))
         for j, (vals, tol) in enumerate(zip(self.values, DOMAIN_TOLERANCES, strict=True)):
             i = np.searchsorted(vals, q[:, j])
             below = vals[np.clip(i - 1, 0, len(vals) - 1)]
             above = vals[np.clip(i, 0, len(vals) - 1)]
             near = np.minimum(np.abs(q[:, j] - below), np.abs(q[:, j] - above)) / tol
             outside = np.maximum(vals[0] - q[:, j], q[:, j] - vals[-1])  # > 0 beyond the range
+            if INTENSIVE[j]:  # between two training values: interpolated, not new
+                inner = np.maximum(inner, np.where(outside > 0, 0.0, near))
+                near = 0.0
             out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
-        return out
+        return inner if interior else out
+
+    def interior_gap(self, q: np.ndarray) -> np.ndarray:
+        """Largest interpolation gap over the intensive quantities, (n_trips,), of the
+        :func:`domain_quantities` ``q`` (n_trips, 5): 0 beyond the training range."""
+        return self._gaps(q, interior=True)
 
     def missing_inputs(self, table: pd.DataFrame, traces=None) -> np.ndarray:
         """Whether each trip lacks an input the model was trained with, (n_trips,) bool."""
@@ -315,7 +319,8 @@ class TrainingDomain:
             if warn:
                 warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
         out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
-                               no_mode=no_mode, reasons=reasons, has_trace=has_trace)
+                               no_mode=no_mode, reasons=reasons, has_trace=has_trace,
+                               interp_gap=self.interior_gap(q) if n else np.zeros(0))
         if reasons:  # some trip is out: the gap and inflation of its out-of-domain spread
             out.ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
             out.inflation = self.inflation(out.ood_gap)

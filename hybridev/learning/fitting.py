@@ -229,7 +229,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
         fold, idx = np.full(len(good), -1), np.asarray(split.cal, int)
         fold[idx] = 0
     scores = [cp.residuals]
-    gaps = [fold_gaps(good, fold, traces, score_traces=traces)[idx]]
+    g0, h0 = fold_gaps(good, fold, traces, score_traces=traces, interior=True)
+    gaps, interp = [g0[idx]], [h0[idx]]  # beyond the fold's conditions / between them
     planned = None
     if traces is not None and domain.needs_trace:
         with warnings.catch_warnings():
@@ -242,14 +243,16 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
             else:
                 dist = raw_distributions(model, good.iloc[idx], None, seed=int(seed))[0][0]
                 mu, sd = dist.mean(), dist.std()
-        g_plan = fold_gaps(good, fold, traces, score_traces=None)[idx]
+        g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
+                                                     interior=True))
         planned = PlannedTripCalibrator().fit(
             e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
             conditions=conditions_of(good.iloc[idx]), fold=fold[idx] if cv else None)
         domain = dataclasses.replace(domain, needs_trace=False)
         scores.append(planned.residuals_)
         gaps.append(g_plan)
-    return planned, GapRate().fit(scores, gaps), domain
+        interp.append(h_plan)
+    return planned, GapRate().fit(scores, gaps, interp=interp), domain
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,

@@ -33,6 +33,11 @@ model's own (conformally calibrated) one:
   winter commute can use 15-20 % more than the smooth synthetic trace; a
   lower bound, in-sample for the network).
 
+A trip *between* training values of its intensive conditions (a temperature
+between two logged ones) is in the domain: it keeps the model's own calibrated
+spread, times the learned rate's interpolation inflation (1 within a tolerance
+of the data; :class:`~hybridev.learning.shift.GapRate`, :meth:`OutOfDomainSpread.rate_inflation`).
+
 Intervals of such trips are ``mu +- z_level * sd_ood``, never narrower than
 the final model's own conformally calibrated interval ``mu +- q sd``. With
 CV+ the CV+ interval is not used for them: its guarantee rests on the new trip
@@ -153,19 +158,27 @@ class OutOfDomainSpread:
                                   spread_factor=cal.spread_factor, quantile=cal.quantile)
         return wide, np.where(ok, sd, np.maximum(sd, sd_ood))
 
+    def rate_inflation(self, a: DomainAssessment) -> np.ndarray:
+        """The learned rate's width multiplier per trip: beyond the intensive conditions
+        (``gap``) times between them (``interp_gap``, :class:`~hybridev.learning.shift.
+        GapRate`); (n_trips,)."""
+        return self.rate.inflation(a.gap) * self.rate.interp_inflation(a.interp_gap)
+
     def _rate_widened(self, a: DomainAssessment, cal: CalibratedInterval
                       ) -> CalibratedInterval:
-        """With a learned rate: trips beyond the intensive conditions (``gap > 1``) at
-        least ``mu +- q s inflation(gap)`` with their own conformal ``q`` (and ``q'``)."""
+        """With a learned rate: trips beyond the intensive conditions (``gap > 1``) or
+        far between them (``interp_gap > 1``) at least ``mu +- q s inflation`` with their
+        own conformal ``q`` (and ``q'``), the inflation :meth:`rate_inflation`."""
         n = len(cal.mean)
         q = np.broadcast_to(np.asarray(cal.quantile, float), (n,))
         q1 = np.broadcast_to(np.asarray(np.nan if cal.quantile_one is None
                                         else cal.quantile_one, float), (n,))
-        out = (a.gap > 1.0) & np.isfinite(q)
+        infl_all = self.rate_inflation(a) * np.ones(n)
+        out = (infl_all > 1.0) & np.isfinite(q)
         if not out.any():
             return cal
         mu, sd = cal.mean[out], cal.std[out]
-        infl = self.rate.inflation(a.gap[out])
+        infl = infl_all[out]
         lo, hi, lo_one = (np.array(v, float, copy=True) for v in (cal.lo, cal.hi, cal.lo_one))
         lo[out] = np.minimum(lo[out], mu - q[out] * sd * infl)
         hi[out] = np.maximum(hi[out], mu + q[out] * sd * infl)
@@ -177,12 +190,13 @@ class OutOfDomainSpread:
         """Step 6 of ``predict_distribution``: the per-trip spread factor.
 
         ``factor`` (the calibrators', a number or per trip) times the learned rate's
-        inflation of the intensive gap, in the domain; at least ``sd_ood / sd`` out of
+        inflation of the intensive gap and interpolation gap (:meth:`rate_inflation`),
+        in the domain; at least ``sd_ood / sd`` out of
         it; a number when every trip has the same.
         """
         if self.rate is not None and assessment is not None:
-            factor = np.broadcast_to(factor, (len(raw.mean),)) * self.rate.inflation(
-                assessment.gap)
+            factor = np.broadcast_to(factor, (len(raw.mean),)) * self.rate_inflation(
+                assessment)
             if len(factor) and np.all(factor == factor[0]):
                 factor = float(factor[0])
         ok, sd_ood = self._raw_sd(assessment, raw)

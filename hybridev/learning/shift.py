@@ -29,6 +29,19 @@ the rate is the larger of that estimate and the fixed 0.25 (conservative).
 The in-domain quantile ``q`` needs at least 9 in-domain trips; with fewer, all
 the trips' scores give it.
 
+**Between training values.** A condition between two training values (a
+temperature between two logged ones) is interpolated, not new: it stays in the
+domain (:meth:`~hybridev.learning.domain.TrainingDomain.interior_gap`). Its
+interval is widened by ``clip(1 + interp_rate * (h - 1), 1, 3)`` with ``h`` the
+distance to the nearest training value in tolerances, so 1 (no widening) for a
+condition within a tolerance of the data. ``interp_rate`` is learned as the
+rate above (without its floor: interpolating may need no widening at all), from the scored trips that lie between their fold's training values
+(``h > 1``) and not beyond them; with fewer than :data:`MIN_SHIFTED_TRIPS` such
+trips it is :data:`~hybridev.learning.domain.OOD_INFLATION_PER_UNIT` (a logged
+history whose days bracket each other closely has no such trips, and needs no
+widening: its ``h`` stays below 1). A model saved before this rate has none
+(interpolation not widened, its predictions unchanged).
+
 Why not weighted conformal prediction (Tibshirani et al. 2019)? It re-weights
 the calibration scores by the likelihood ratio of the new trip's conditions;
 for a trip outside the training conditions that ratio is unbounded and the
@@ -47,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain
+from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain, domain_quantities
 
 __all__ = ["FIT_LEVEL", "GAP_RATE_CAP", "GAP_RATE_FLOOR", "MAX_INFLATION", "MIN_SHIFTED_TRIPS", "GapRate",
            "fold_gaps"]
@@ -80,6 +93,11 @@ class GapRate:
         Scored trips outside their fold's training domain that it was learned from.
     learned_ : bool
         Whether the quantile was defined (``n_shifted_ >= MIN_SHIFTED_TRIPS``).
+    interp_rate_ : float
+        Inflation per unit interpolation gap beyond 1 (0: a model saved before it).
+    n_interp_ : int
+        Scored trips between their fold's training values (gap ``> 1``) it was
+        learned from.
 
     Examples
     --------
@@ -91,7 +109,10 @@ class GapRate:
     (True, 60)
     """
 
-    def fit(self, scores, gaps, *, level: float = FIT_LEVEL) -> GapRate:
+    interp_rate_ = 0.0  # class defaults: a model saved before the interpolation rate
+    n_interp_ = 0
+
+    def fit(self, scores, gaps, *, interp=None, level: float = FIT_LEVEL) -> GapRate:
         """Learn the rate from normalised scores and their gaps.
 
         Parameters
@@ -102,50 +123,84 @@ class GapRate:
             each against its own in-domain quantile.
         gaps : array_like, shape (n,) or a sequence of such arrays
             Each trip's largest intensive gap to its fold's training domain.
+        interp : array_like or a sequence of such arrays, optional
+            Each trip's largest interpolation gap between its fold's training values
+            (:meth:`~hybridev.learning.domain.TrainingDomain.interior_gap`); None:
+            no such trips (the fallback rate).
         level : float
             Level of the in-domain quantile and of the rate's quantile.
         """
         if isinstance(scores, np.ndarray) or np.ndim(scores[0]) == 0:
             scores, gaps = [scores], [gaps]
+            interp = None if interp is None else [interp]
+        if interp is None:
+            interp = [np.zeros(np.shape(g)) for g in gaps]
+        self.rate_, self.n_shifted_, self.learned_ = self._learn(scores, gaps, None, level,
+                                                                 GAP_RATE_FLOOR)
+        self.interp_rate_, self.n_interp_, _ = self._learn(scores, interp, gaps, level, 0.0)
+        return self
+
+    @staticmethod
+    def _learn(scores, gaps, beyond, level: float, floor: float
+               ) -> tuple[float, int, bool]:
+        """``(rate, n_shifted, learned)`` from the trips with ``gap > 1`` (and, with
+        ``beyond`` given, not beyond the range: ``beyond <= 1``); at least ``floor``."""
+        if beyond is None:
+            beyond = [np.zeros(np.shape(g)) for g in gaps]
         k, w = [], []
-        for s, g in zip(scores, gaps, strict=True):
+        for s, g, b in zip(scores, gaps, beyond, strict=True):
             a, g = np.abs(np.asarray(s, float)), np.asarray(g, float)
-            if a.shape != g.shape:
+            if a.shape != g.shape or a.shape != np.shape(b):
                 raise ValueError(f"scores and gaps must have one value per trip; got "
                                  f"{a.shape}, {g.shape}")
             out = g > 1.0
+            plain = ~out & (np.asarray(b, float) <= 1.0)  # neither gap: the in-domain trips
+            out &= np.asarray(b, float) <= 1.0
             if not out.any() or a.size < 9:
                 continue
-            inside = a[~out] if (~out).sum() >= 9 else a
+            inside = a[plain] if plain.sum() >= 9 else a
             q = max(_conformal_quantile(inside, level), 1e-12)
             k.append((a[out] / q - 1.0) / (g[out] - 1.0))
             w.append(g[out] - 1.0)
         k = np.concatenate(k) if k else np.zeros(0)
-        self.n_shifted_ = int(k.size)
-        self.learned_ = bool(k.size >= MIN_SHIFTED_TRIPS)
+        learned = bool(k.size >= MIN_SHIFTED_TRIPS)
         rate = _weighted_quantile(k, np.concatenate(w), level) if k.size else 0.0
-        if not self.learned_:
+        if not learned:
             rate = max(rate, OOD_INFLATION_PER_UNIT)
-        self.rate_ = float(np.clip(rate, GAP_RATE_FLOOR, GAP_RATE_CAP))
-        return self
+        return float(np.clip(rate, floor, GAP_RATE_CAP)), int(k.size), learned
 
     def inflation(self, gap) -> np.ndarray:
         """Width multiplier ``clip(1 + rate_ (gap - 1), 1, 3)``, shape of ``gap``."""
         g = np.asarray(gap, float)
         return np.clip(1.0 + self.rate_ * (g - 1.0), 1.0, MAX_INFLATION)
 
+    def interp_inflation(self, gap) -> np.ndarray:
+        """Width multiplier between training values ``clip(1 + interp_rate_ (gap - 1),
+        1, 3)``, shape of ``gap`` (None: 1)."""
+        if gap is None:
+            return np.float64(1.0)
+        g = np.asarray(gap, float)
+        return np.clip(1.0 + self.interp_rate_ * (g - 1.0), 1.0, MAX_INFLATION)
+
     def to_arrays(self) -> dict[str, np.ndarray]:
-        """State for the saved model: ``{"state": [rate_, n_shifted_, learned_]}``."""
-        return {"state": np.array([self.rate_, self.n_shifted_, float(self.learned_)])}
+        """State for the saved model: ``{"state": [rate_, n_shifted_, learned_,
+        interp_rate_, n_interp_]}``."""
+        return {"state": np.array([self.rate_, self.n_shifted_, float(self.learned_),
+                                   self.interp_rate_, self.n_interp_])}
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> GapRate:
-        """Inverse of :meth:`to_arrays` (ValueError on a bad array)."""
+        """Inverse of :meth:`to_arrays` (ValueError on a bad array); a state of 3 values
+        (saved before the interpolation rate) gets ``interp_rate_ = 0``."""
         s = np.asarray(a.get("state", []), float)
-        if s.shape != (3,) or not np.all(np.isfinite(s)) or s[0] < 0:
-            raise ValueError(f"gap rate: array 'state' must hold 3 finite values; got {s!r}")
+        if s.shape not in ((3,), (5,)) or not np.all(np.isfinite(s)) or s[0] < 0 or (
+                s.size == 5 and s[3] < 0):
+            raise ValueError(f"gap rate: array 'state' must hold 3 or 5 finite values; "
+                             f"got {s!r}")
         out = cls()
         out.rate_, out.n_shifted_, out.learned_ = float(s[0]), int(s[1]), bool(s[2])
+        if s.size == 5:
+            out.interp_rate_, out.n_interp_ = float(s[3]), int(s[4])
         return out
 
 
@@ -163,8 +218,11 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level: float) ->
 
 
 def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
-              score_traces=None) -> np.ndarray:
+              score_traces=None, interior: bool = False):
     """Each scored trip's largest intensive gap to its fold's training domain, (n,).
+
+    With ``interior=True`` a pair: the gaps and the interpolation gaps
+    (:meth:`~hybridev.learning.domain.TrainingDomain.interior_gap`), (n,) each.
 
     Parameters
     ----------
@@ -181,7 +239,7 @@ def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
         Traces with which the scored trips are scored (None: summary only).
     """
     fold = np.asarray(fold, int)
-    out = np.zeros(len(trips))
+    out, inner = np.zeros(len(trips)), np.zeros(len(trips))
     folds = np.unique(fold[fold >= 0])
     for f in folds:
         train = (fold != f) & ((fold >= 0) | (len(folds) == 1))
@@ -190,5 +248,7 @@ def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
         dom = TrainingDomain.fit(trips.iloc[np.flatnonzero(train)], np.zeros((train.sum(), 1)),
                                  traces=traces)
         held = np.flatnonzero(fold == f)
+        q = domain_quantities(trips.iloc[held], score_traces)[0]
         out[held] = dom.gap(trips.iloc[held], score_traces)
-    return out
+        inner[held] = dom.interior_gap(q)
+    return (out, inner) if interior else out

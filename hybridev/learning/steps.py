@@ -135,6 +135,10 @@ class DomainAssessment:
         aside.
     no_trace, no_mode : numpy.ndarray of bool, shape (n_trips,)
         Trips lacking a logged trace / a mode the model was trained with.
+    interp_gap : numpy.ndarray, shape (n_trips,), or None
+        Largest interpolation gap between training values of the intensive
+        quantities (:meth:`TrainingDomain.interior_gap`; in the domain, widened at a
+        learned rate).
     has_trace : numpy.ndarray of bool, shape (n_trips,), or None
         Trips with a logged trace (whatever the model was trained with): the others
         are planned trips of a model with a planned-trip calibrator
@@ -161,6 +165,7 @@ class DomainAssessment:
     ood_gap: np.ndarray | None = None
     inflation: np.ndarray | None = None
     has_trace: np.ndarray | None = None
+    interp_gap: np.ndarray | None = None
 
 
 @dataclass

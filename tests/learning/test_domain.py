@@ -19,16 +19,21 @@ def _table(temps, dist=10.0, speed=40.0, mode="eco"):
                          "temperature_c": np.asarray(temps, float), "mode": [mode] * n})
 
 
-def test_gap_inside_the_range_leaves_the_domain():
-    # the paper's design: -5, 20, 32 degC only; 3 degC is 8 degC from any training trip
+def test_between_training_values_is_interpolated_beyond_them_is_not():
+    # the paper's design: -5, 20, 32 degC only; 3 and 14 degC lie between two of them
     dom = TrainingDomain.fit(_table([-5, 20, 32] * 4), np.zeros((12, 1)))
-    score, ok = dom.score(_table([-5, -3, 3, 14, 21.5, 32, 40]))
-    assert ok.tolist() == [True, True, False, False, True, True, False]
-    assert score[2] == pytest.approx(8 / 3)
-    assert score[-1] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 degC
-    # the score rises as the trip leaves the domain
+    score, ok = dom.score(_table([-5, -3, 3, 14, 21.5, 32, 40, -6.5]))
+    assert ok.tolist() == [True, True, True, True, True, True, False, False]
+    assert score[:6].tolist() == [0.0] * 6
+    assert score[-2] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 degC
+    assert score[-1] == pytest.approx(1.5)
+    # beyond the range the score rises as the trip leaves the domain
     s, _ = dom.score(_table([32, 36, 45, 60]))
     assert np.all(np.diff(s) > 0)
+    # the extensive quantities keep the distance to the nearest training value
+    d = TrainingDomain.fit(_table([20] * 2, dist=10.0).assign(distance_km=[10.0, 40.0]),
+                           np.zeros((2, 1)))
+    assert d.gaps(_table([20], dist=20.0))[0, 2] == pytest.approx(np.log(2) / np.log(1.5))
 
 
 def test_speed_leaves_the_domain_but_distance_and_duration_do_not():

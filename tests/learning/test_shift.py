@@ -1,0 +1,71 @@
+"""The learned widening rates of :mod:`hybridev.learning.shift`: between training values."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain, domain_quantities
+from hybridev.learning.ood import OutOfDomainSpread
+from hybridev.learning.shift import GAP_RATE_FLOOR, GapRate, fold_gaps
+
+
+def _trips(temps):
+    n = len(temps)
+    return pd.DataFrame({"distance_km": np.full(n, 10.0), "avg_speed_kmh": np.full(n, 40.0),
+                         "temperature_c": np.asarray(temps, float)})
+
+
+def test_interior_gap_is_the_distance_between_training_values_only():
+    dom = TrainingDomain.fit(_trips([-5.0, 20.0, 32.0]), np.zeros((3, 1)))
+    q = domain_quantities(_trips([-5.0, 7.5, 26.0, 21.0, 40.0]))[0]
+    np.testing.assert_allclose(dom.interior_gap(q), [0.0, 12.5 / 3, 2.0, 1 / 3, 0.0])
+    a = dom.assess(_trips([7.5, 40.0]))
+    assert a.in_domain.tolist() == [True, False]  # between: in the domain; beyond: not
+    np.testing.assert_allclose(a.interp_gap, [12.5 / 3, 0.0])
+
+
+def test_interpolation_rate_is_learned_from_trips_between_their_folds_values():
+    rng = np.random.default_rng(1)
+    beyond = np.zeros(500)
+    between = np.r_[np.zeros(300), rng.uniform(1.0, 3.0, 200)]
+    flat = rng.standard_normal(500)
+    grow = flat * (1.0 + 0.8 * np.maximum(between - 1.0, 0.0))
+    r_flat = GapRate().fit(flat, beyond, interp=between)
+    r_grow = GapRate().fit(grow, beyond, interp=between)
+    assert r_flat.n_interp_ == r_grow.n_interp_ == 200
+    assert r_flat.interp_rate_ < 0.3 < r_grow.interp_rate_
+    assert r_flat.rate_ == r_grow.rate_ >= GAP_RATE_FLOOR  # nothing beyond: the fixed rate
+    q = np.quantile(np.abs(grow[:300]), 0.9)
+    assert (np.abs(grow[300:]) <= q * r_grow.interp_inflation(between[300:])).mean() >= 0.85
+    # within a tolerance of the data: no widening
+    assert r_grow.interp_inflation(np.array([0.0, 0.9]))[1] == 1.0
+    # no trips between the folds' values: the fixed rate; none given: the same
+    assert GapRate().fit(flat, beyond).interp_rate_ == OOD_INFLATION_PER_UNIT
+    back = GapRate.from_arrays(r_grow.to_arrays())
+    assert (back.interp_rate_, back.n_interp_) == (r_grow.interp_rate_, 200)
+
+
+def test_a_rate_saved_before_the_interpolation_rate_does_not_widen_between():
+    old = GapRate.from_arrays({"state": np.array([0.5, 20.0, 1.0])})
+    assert old.interp_rate_ == 0.0
+    np.testing.assert_array_equal(old.interp_inflation(np.array([0.0, 5.0])), [1.0, 1.0])
+    with pytest.raises(ValueError, match="3 or 5"):
+        GapRate.from_arrays({"state": np.array([0.5, 20.0, 1.0, 0.3])})
+
+
+def test_ood_spread_widens_trips_between_training_values_by_the_learned_rate():
+    dom = TrainingDomain.fit(_trips([-5.0, 20.0]), np.zeros((2, 1)))
+    a = dom.assess(_trips([19.0, 7.5]))  # 1 degC from 20; 12.5 degC from either
+    rate = GapRate().fit(np.zeros(20), np.zeros(20))  # no trips between: 0.25
+    spread = OutOfDomainSpread(rate=rate)
+    infl = spread.rate_inflation(a)
+    np.testing.assert_allclose(infl, [1.0, 1.0 + 0.25 * (12.5 / 3 - 1.0)])
+    assert a.in_domain.all()
+
+
+def test_fold_gaps_give_the_interpolation_gap_of_each_folds_domain():
+    t = _trips([0.0, 0.0, 20.0, 20.0, 10.0, 10.0])
+    g, h = fold_gaps(t, np.array([0, 0, 1, 1, 2, 2]), interior=True)
+    assert g[4:].tolist() == [0.0, 0.0]  # 10 degC lies between 0 and 20 degC
+    np.testing.assert_allclose(h[4:], [10 / 3, 10 / 3])
+    np.testing.assert_array_equal(fold_gaps(t, np.array([0, 0, 1, 1, 2, 2])), g)
