@@ -426,14 +426,15 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     """
     veh = vehicle or VehicleParams()
     n = len(trips)
-    mode = (trips["mode"].astype(object) if "mode" in trips.columns
-            else pd.Series([None] * n, index=trips.index, dtype=object))
-    known = (mode.notna() & (mode.astype(str).str.len() > 0)).to_numpy()
+    # object cells; known: not missing (None, NaN, NA) and not "" (numpy: no per-row pandas)
+    mode = (trips["mode"].to_numpy(object).copy() if "mode" in trips.columns
+            else np.full(n, None, dtype=object))
+    known = ~pd.isna(mode)
+    known[known] = mode[known] != ""
     keys = trace_keys(trips)  # as simulate: trip_id, else the trip's own inputs
     logged = np.zeros(n, dtype=bool)
     if traces is not None and "trip_id" in trips.columns:
         logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
-    mode = mode.to_numpy(object).copy()
     if isinstance(missing_mode, str) and missing_mode == "marginalize":
         alts, n_alt = list(PROFILES), len(PROFILES)
         # a logged trace already holds the driving style: one row, no mode constants
