@@ -454,8 +454,11 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     modes[~kn] = alt_arr[k[~kn]]
     log_w = np.where(kn, 0.0, -np.log(n_alt))
     temp = trips["temperature_c"].to_numpy(float)
-    soc0 = (pd.to_numeric(trips["soc_initial"], errors="coerce").to_numpy(float).copy()
-            if "soc_initial" in trips.columns else np.full(n, np.nan))
+    soc0 = np.full(n, np.nan)
+    if "soc_initial" in trips.columns:
+        col = trips["soc_initial"]  # float64 (validated tables): no to_numeric Series
+        soc0 = (col.to_numpy(float) if col.dtype == np.float64
+                else pd.to_numeric(col, errors="coerce").to_numpy(float)).copy()
     capped_s = np.zeros(len(trip))
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
