@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_fleet.py [--quick] [--big-trips N] [--out FILE]
+    python benchmarks/bench_fleet.py [--quick] [--big-trips N] [--throughput-only] [--out FILE]
 
 Model: ``HybridModel()`` with default settings (physics posterior, 5
 heteroscedastic members, conformal step; ``n_steps=1000``, 200 posterior
@@ -27,6 +27,11 @@ Sections:
    ones, flags against the planted outliers);
 5. a profile (cProfile) of one partition's ``predict_interval``.
 
+Section 1 also checks that the dask output equals ``predict_interval`` of the same
+trips on one pandas frame bit for bit, and times that in-process call (CPU time of
+the second call on one 50,000-trip file: scoring alone, without parquet, dask or the
+first call's page faults). ``--throughput-only`` runs sections 1 and 5 only.
+
 Targets (issue 34; issue 14 asked for 70 % and 20,000): >= 80 % parallel
 efficiency at 2 cores, >= 50,000 trips/s per core with intervals. Per core is
 read from the worker CPU time (trips per CPU second of the one worker) beside
@@ -40,6 +45,7 @@ import io
 import pstats
 import resource
 import shutil
+import sys
 import tempfile
 import time
 import warnings
@@ -133,15 +139,38 @@ def _profile(model, trips: pd.DataFrame) -> str:
     return "\n".join(keep)
 
 
+def _pandas_equal(model, src: Path, dst: Path) -> bool:
+    """The dask output of ``src`` (in ``dst``) equals pandas ``predict_interval`` bit for bit."""
+    files = sorted(src.glob("*.parquet"))
+    want = model.predict_interval(pd.concat([pd.read_parquet(f) for f in files],
+                                            ignore_index=True), LEVEL)
+    got = pd.read_parquet(dst).reset_index(drop=True)
+    got = got.astype({c: want[c].dtype for c in got.columns if c in want.columns})
+    return list(got.columns) == list(want.columns) and got.equals(want)
+
+
+def _in_process(model, trips: pd.DataFrame) -> tuple[float, float]:
+    """Wall and CPU seconds of the second ``predict_interval`` of ``trips`` in this process."""
+    model.predict_interval(trips, LEVEL)
+    w0, c0 = time.perf_counter(), time.process_time()
+    model.predict_interval(trips, LEVEL)
+    return time.perf_counter() - w0, time.process_time() - c0
+
+
 def _uptime() -> str:
     return Path("/proc/loadavg").read_text().split(" ", 3)[:3].__str__()
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    only = "--throughput-only" in argv  # sections 1 and 5 only
+    argv = [a for a in argv if a != "--throughput-only"]
     args = bench.parse_args(__doc__, argv, name="bench_fleet", counts={
         "repeats": (2, 1, "timed runs per throughput configuration"),
         "big_trips": (10_000_000, 400_000, "trips of the biggest end-to-end run"),
         "vehicles": (100, 12, "vehicles of the fleet calibration")})
+    if only:
+        args.command += " --throughput-only"
     import dask
     import distributed
 
@@ -168,49 +197,53 @@ def main(argv=None) -> int:
         per_core = tput[1][1]
         cpu_core = n_thr / CPU[(1, str(src))]
         eff_cpu = (n_thr / CPU[(2, str(src))]) / cpu_core  # CPU work per trip, 2 vs 1 worker
+        same = _pandas_equal(model, src, work / "out1")
+        first = pd.read_parquet(next(iter(sorted(src.glob("*.parquet")))))
+        inproc_wall, inproc_cpu = _in_process(model, first)
 
-        # 2. memory vs partition size and vs data size -------------------------------
-        mem_part = []
-        for r in ((25_000, 50_000, 100_000) if quick else (25_000, 50_000, 100_000, 200_000)):
-            s = _write_trips(work / f"part_{r}", n_thr, r)
-            (t,), base, peak = _session(model, 2, [(s, work / f"outp{r}")], warm)
-            mem_part.append((r, n_thr, t, base, peak))
-        mem_size = []
-        sizes = (50_000, 100_000, 200_000) if quick else (100_000, 400_000, 1_600_000)
-        for n in sizes:
-            s = src if n == n_thr else _write_trips(work / f"size_{n}", n, rows)
-            (t,), base, peak = _session(model, 2, [(s, work / f"outs{n}")], warm)
-            mem_size.append((rows, n, t, base, peak))
+        if not only:  # sections 2-4
+            # 2. memory vs partition size and vs data size -------------------------------
+            mem_part = []
+            for r in ((25_000, 50_000, 100_000) if quick else (25_000, 50_000, 100_000, 200_000)):
+                s = _write_trips(work / f"part_{r}", n_thr, r)
+                (t,), base, peak = _session(model, 2, [(s, work / f"outp{r}")], warm)
+                mem_part.append((r, n_thr, t, base, peak))
+            mem_size = []
+            sizes = (50_000, 100_000, 200_000) if quick else (100_000, 400_000, 1_600_000)
+            for n in sizes:
+                s = src if n == n_thr else _write_trips(work / f"size_{n}", n, rows)
+                (t,), base, peak = _session(model, 2, [(s, work / f"outs{n}")], warm)
+                mem_size.append((rows, n, t, base, peak))
 
-        # 3. biggest end-to-end run -----------------------------------------------------
-        nb = args.big_trips
-        t0 = time.perf_counter()
-        big = _write_trips(work / "big", nb, rows)
-        gen_s = time.perf_counter() - t0
-        (big_s,), _, peak_b = _session(model, 2, [(big, work / "big_out")], warm)
-        shutil.rmtree(big)
-        out_mb = sum(p.stat().st_size for p in (work / "big_out").glob("*.parquet")) / 2**20
-        n_out = sum(__import__("pyarrow.parquet").parquet.ParquetFile(p).metadata.num_rows
-                    for p in (work / "big_out").glob("*.parquet"))
-        shutil.rmtree(work / "big_out")
-
-        # 4. fleet calibration -------------------------------------------------------------
-        from hybridev.fleet.calibrate import calibrate_fleet
-        from hybridev.fleet.synth import make_fleet
-
-        nv = args.vehicles
-        veh, trips = make_fleet(nv, 60, seed=0, n_outliers=3, n_small=max(nv // 10, 1),
-                                small_trips=8)
-        cluster, client = _cluster(2)
-        try:
+            # 3. biggest end-to-end run -----------------------------------------------------
+            nb = args.big_trips
             t0 = time.perf_counter()
-            rep = calibrate_fleet(trips, client=client, seed=0)
-            cal_s = time.perf_counter() - t0
-        finally:
-            client.close()
-            cluster.close()
-        planted = set(veh.vehicle_id[veh.outlier != ""])
-        flagged = set(rep.vehicle_id[rep.flagged])
+            big = _write_trips(work / "big", nb, rows)
+            gen_s = time.perf_counter() - t0
+            (big_s,), _, peak_b = _session(model, 2, [(big, work / "big_out")], warm)
+            shutil.rmtree(big)
+            out_mb = sum(p.stat().st_size for p in (work / "big_out").glob("*.parquet")) / 2**20
+            n_out = sum(__import__("pyarrow.parquet").parquet.ParquetFile(p).metadata.num_rows
+                        for p in (work / "big_out").glob("*.parquet"))
+            shutil.rmtree(work / "big_out")
+
+            # 4. fleet calibration -------------------------------------------------------------
+            from hybridev.fleet.calibrate import calibrate_fleet
+            from hybridev.fleet.synth import make_fleet
+
+            nv = args.vehicles
+            veh, trips = make_fleet(nv, 60, seed=0, n_outliers=3, n_small=max(nv // 10, 1),
+                                    small_trips=8)
+            cluster, client = _cluster(2)
+            try:
+                t0 = time.perf_counter()
+                rep = calibrate_fleet(trips, client=client, seed=0)
+                cal_s = time.perf_counter() - t0
+            finally:
+                client.close()
+                cluster.close()
+            planted = set(veh.vehicle_id[veh.outlier != ""])
+            flagged = set(rep.vehicle_id[rep.flagged])
 
         # 5. profile of one partition --------------------------------------------------------
         prof = _profile(model, pd.read_parquet(next(iter(sorted(src.glob("*.parquet"))))))
@@ -247,7 +280,16 @@ def main(argv=None) -> int:
             [">= 50,000 trips/s per core with intervals",
              f"{per_core:,.0f} trips/s on 1 worker (wall); {cpu_core:,.0f} per CPU second: "
              f"**{'met' if per_core >= 50_000 else 'not met'}** on wall time, "
-             f"**{'met' if cpu_core >= 50_000 else 'not met'}** per CPU second"]]), "",
+             f"**{'met' if cpu_core >= 50_000 else 'not met'}** per CPU second"],
+            ["pandas = dask bit for bit (the 1-worker output against one pandas call)",
+             f"**{'met' if same else 'not met'}**"]]), "",
+        f"Scoring alone, in this process (one file of {len(first):,} trips, second call, "
+        f"no parquet or dask): {inproc_cpu:.2f} s CPU ({inproc_wall:.2f} s wall), "
+        f"**{len(first) / inproc_cpu:,.0f} trips per CPU second**; the rest of the worker's "
+        "CPU time is reading and writing parquet, dask's task handling and the fresh "
+        "memory (page faults) of each partition.", ""]
+    if not only:
+        lines += [
         "## 2. Peak memory per worker", "",
         "Peak resident set (`ru_maxrss`) of the larger worker after the warm-up (imports, "
         "model) and after the run; the difference is what scoring needed.", "",
@@ -268,7 +310,8 @@ def main(argv=None) -> int:
         f"`calibrate_fleet` (posterior per vehicle, adaptive emcee; fleet prior for the "
         f"small vehicles) on 2 workers in **{cal_s:.0f} s** "
         f"({cal_s / nv:.1f} s per vehicle). Flagged: {sorted(flagged)}; planted outliers: "
-        f"{sorted(planted)} -> **{'identical' if flagged == planted else 'differ'}**.", "",
+        f"{sorted(planted)} -> **{'identical' if flagged == planted else 'differ'}**.", ""]
+    lines += [
         "## 5. Profile of one partition", "",
         f"cProfile of `predict_interval` on one file of {rows:,} trips (in-process, "
         "cumulative time):", "", "```", prof, "```", ""]

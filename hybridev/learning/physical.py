@@ -191,15 +191,18 @@ def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
     ``confidence_rel`` is ``confidence`` over ``max(|E|, 0.05 kWh/km d)``.
     """
     e_p = table["energy_kwh_physics"].to_numpy(float)
+    d_km = table["distance_km"].to_numpy(float)
     fl = np.minimum(e_p, 0.0) if residual else np.zeros_like(e_p)
-    fl = np.maximum(fl, energy_floor_kwh(table, vehicle))
+    grade = table["grade_pct"].fillna(0.0).to_numpy(float) if "grade_pct" in table else 0.0
+    fl = np.maximum(fl, _energy_floor(d_km, table["avg_speed_kmh"].to_numpy(float), grade,
+                                      vehicle))  # energy_floor_kwh, each column read once
     point = np.maximum(interval.mean, fl)
     lo, hi, lo_one = (np.maximum(a, fl) for a in (interval.lo, interval.hi, interval.lo_one))
     lo_one = np.minimum(lo_one, point)  # the SoC interval always holds the point prediction
     cap = vehicle.battery_capacity_kwh
     s0 = table["soc_initial"].to_numpy(float)
     may_empty = hi >= s0 * cap
-    scale = np.maximum(np.abs(point), 0.05 * table["distance_km"].to_numpy(float))
+    scale = np.maximum(np.abs(point), 0.05 * d_km)
     return append_columns(table, {  # one concat: column inserts dominate on small tables
         "energy_kwh_pred": point, "energy_kwh_lo": lo, "energy_kwh_hi": hi,
         "soc_final_pred": soc_from_energy(s0, point, cap),

@@ -104,7 +104,7 @@ class EnergyDistribution:
         """
         if "comp" not in self._cache:
             p_mean = self.physics_draws_kwh.mean(axis=0)
-            p_var = self.physics_draws_kwh.var(axis=0)
+            p_var = self.draws_var()
             means = (p_mean[None, :] + self.residual_mean_kwh).T
             var = (p_var[None, :] + self.residual_std_kwh**2).T
             k = means.shape[1]
@@ -115,6 +115,12 @@ class EnergyDistribution:
             stds = c * np.sqrt(var)
             self._cache["comp"] = (means, stds, np.full(k, 1.0 / k))
         return self._cache["comp"]
+
+    def draws_var(self) -> np.ndarray:
+        """Variance of the physics draws per trip, shape (n_trips,), kWh^2 (computed once)."""
+        if "p_var" not in self._cache:
+            self._cache["p_var"] = self.physics_draws_kwh.var(axis=0)
+        return self._cache["p_var"]
 
     def mean(self) -> np.ndarray:
         """Predictive mean energy per trip, shape (n_trips,), kWh."""
@@ -145,7 +151,7 @@ class EnergyDistribution:
         [2.0, 1.0]
         """
         c2 = np.asarray(self.spread_factor, float) ** 2
-        p_var = self.physics_draws_kwh.var(axis=0)
+        p_var = self.draws_var()
         rest = (self.residual_std_kwh**2).mean(axis=0) + self.residual_mean_kwh.var(axis=0)
         return np.maximum((c2 - 1.0) * p_var + c2 * rest, 0.0)
 
@@ -216,4 +222,4 @@ def raw_prediction(table, dists: list[EnergyDistribution], mode_means=None) -> R
         std=dist.std(),
         fold_means=np.stack([d.mean() for d in folds]) if folds else None,
         fold_stds=(np.maximum(np.stack([d.std() for d in folds]), 1e-12) if folds else None),
-        var_draws=dist.physics_draws_kwh.var(axis=0), excess_var=dist.excess_var())
+        var_draws=dist.draws_var(), excess_var=dist.excess_var())

@@ -103,7 +103,10 @@ class PhysicsDraws:
         for energy, plain in zip(self.energies, self.plain, strict=True):
             if fade is not None and plain is not None:
                 p = plain()
-                energy = p + fade * (energy - p)
+                blend = energy - p  # p + fade (energy - p), bit for bit, with one temporary
+                blend *= fade  # (n_draws x n_trips arrays: each fresh one is page faults)
+                blend += p
+                energy = blend
             energies.append(energy[1:] if self.n_draws else energy[:1])
             tables.append(with_physics_columns(self.table, energy[0], self.max_speed_kmh,
                                                self.capacity_kwh))

@@ -68,7 +68,12 @@ def profile_table(profile, n: int, fields: tuple[str, ...]) -> dict[str, np.ndar
         if arr.shape != (n,):
             raise ValueError(f"profile must be one profile or {n} per-trip profiles; "
                              f"got shape {arr.shape}")
-        inv, keys = pd.factorize(arr)  # hashes in C: no Python loop over trips
+        if n <= 64 and all(isinstance(a, str | DrivingProfile) for a in arr):
+            first: dict = {}  # a few trips: a dict beats pandas' set-up (same order)
+            inv = np.array([first.setdefault(a, len(first)) for a in arr], dtype=np.intp)
+            keys = list(first)
+        else:
+            inv, keys = pd.factorize(arr)  # hashes in C: no Python loop over trips
         uniq = [get_profile(k) for k in keys]
     out = {}
     for f in fields:

@@ -451,14 +451,15 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     """
     veh = vehicle or VehicleParams()
     n = len(trips)
-    mode = (trips["mode"].astype(object) if "mode" in trips.columns
-            else pd.Series([None] * n, index=trips.index, dtype=object))
-    known = (mode.notna() & (mode.astype(str).str.len() > 0)).to_numpy()
+    # object cells; known: not missing (None, NaN, NA) and not "" (numpy: no per-row pandas)
+    mode = (trips["mode"].to_numpy(object).copy() if "mode" in trips.columns
+            else np.full(n, None, dtype=object))
+    known = ~pd.isna(mode)
+    known[known] = mode[known] != ""
     keys = trace_keys(trips)  # as simulate: trip_id, else the trip's own inputs
     logged = np.zeros(n, dtype=bool)
     if traces is not None and "trip_id" in trips.columns:
         logged = pd.Index(trips["trip_id"].astype(object)).isin(traces.trip_id)
-    mode = mode.to_numpy(object).copy()
     if isinstance(missing_mode, str) and missing_mode == "marginalize":
         alts, n_alt = list(PROFILES), len(PROFILES)
         # a logged trace already holds the driving style: one row, no mode constants
@@ -478,8 +479,11 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     modes[~kn] = alt_arr[k[~kn]]
     log_w = np.where(kn, 0.0, -np.log(n_alt))
     temp = trips["temperature_c"].to_numpy(float)
-    soc0 = (pd.to_numeric(trips["soc_initial"], errors="coerce").to_numpy(float).copy()
-            if "soc_initial" in trips.columns else np.full(n, np.nan))
+    soc0 = np.full(n, np.nan)
+    if "soc_initial" in trips.columns:
+        col = trips["soc_initial"]  # float64 (validated tables): no to_numeric Series
+        soc0 = (col.to_numpy(float) if col.dtype == np.float64
+                else pd.to_numeric(col, errors="coerce").to_numpy(float)).copy()
     capped_s = np.zeros(len(trip))
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"

@@ -22,6 +22,7 @@ unsuffixed (``energy_kwh``, ``soc_final``); model outputs carry their source
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -297,6 +298,13 @@ def _physics_columns(energy_kwh, max_speed_kmh, capacity_kwh: float, soc_initial
             "kwh_per_km_physics": energy / distance_km}
 
 
+@functools.lru_cache(maxsize=256)
+def _column_index(names: tuple[str, ...]) -> pd.Index:
+    """A (shared, immutable) column index of ``names``: building one from strings costs
+    more than a one-row table's arithmetic."""
+    return pd.Index(names)
+
+
 def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.DataFrame:
     """A copy of ``table`` with ``columns`` (name to array, shape (n_rows,)) set.
 
@@ -315,8 +323,16 @@ def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.Da
             or table.attrs or table.columns.dtype != "str"
             or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())):
         return table.assign(**columns)  # replaced columns or metadata: the general path
-    new = pd.DataFrame(columns, index=table.index)
-    return pd.concat([table, new], axis=1)
+    parts, names, values = [table], list(columns), list(columns.values())
+    start = 0
+    for i in range(1, len(values) + 1):  # one 2-D block per run of columns of one dtype
+        if i == len(values) or values[i].dtype != values[start].dtype:
+            block = (values[start][:, None] if i - start == 1
+                     else np.stack(values[start:i], axis=1))
+            parts.append(pd.DataFrame(block, index=table.index, copy=False,
+                                      columns=_column_index(tuple(names[start:i]))))
+            start = i
+    return pd.concat(parts, axis=1)
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,18 @@ def test_predict_equals_pandas(client, fitted, nparts):
           fitted.predict(trips))
 
 
+def test_partition_scored_in_slices_gives_the_same_rows(fitted, monkeypatch):
+    """A partition longer than SCORE_CHUNK_ROWS is scored slice by slice, bit for bit."""
+    from hybridev.fleet import scoring
+
+    trips = _trips(ids=True)
+    whole = scoring._score(trips, fitted, "predict_interval", {"level": 0.8, "seed": 3})
+    monkeypatch.setattr(scoring, "SCORE_CHUNK_ROWS", 16)  # 150 rows: ten slices
+    sliced = scoring._score(trips, fitted, "predict_interval", {"level": 0.8, "seed": 3})
+    pd.testing.assert_frame_equal(sliced, whole, check_exact=True)
+    assert sliced.equals(whole)
+
+
 def test_model_is_one_task_of_the_graph(fitted):
     """Every partition task depends on one key holding the model: shipped once."""
     lazy = fitted.predict_interval(dd.from_pandas(_trips(60), npartitions=5), 0.8)
