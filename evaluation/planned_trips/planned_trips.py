@@ -47,6 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import shift_and_small_data as ssd  # the M1 loader
 from study_io import DEFAULT_DATA, run_study, write_markdown
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from baseline_conformal import conformal_baseline
+
 from hybridev import HybridModel
 from hybridev.physics.stats_build import trip_stats
 
@@ -95,7 +98,9 @@ def _summarise(rows: list[dict], key: str) -> dict:
             "flagged": int(sum(int(np.sum(r[key]["flagged"])) for r in rows))}
 
 
-def _baselines(m, extra, tr, te, vehicle, heater_kind) -> dict:
+def _baselines(m, extra, tr, te, vehicle, heater_kind, date) -> tuple[dict, dict]:
+    """Point predictions of the summary (and traced) baselines on ``te`` and their
+    conformal intervals (:mod:`baseline_conformal`)."""
     from scipy.optimize import nnls
     from sklearn.linear_model import LinearRegression
 
@@ -103,15 +108,25 @@ def _baselines(m, extra, tr, te, vehicle, heater_kind) -> dict:
     y = trips["energy_kwh"].to_numpy(float)
     d = trips["distance_km"].to_numpy(float)
     xs = _summary_x(trips, extra)
-    out = {"linreg_summary": LinearRegression().fit(xs[tr], y[tr]).predict(xs[te]),
-           "median_kwh_per_km": np.median(y[tr] / d[tr]) * d[te]}
     kind = heater_kind or ("ptc" if vehicle.heater_kind == "auto" else vehicle.heater_kind)
     veh = dataclasses.replace(vehicle, heater_kind=kind)  # the terms of the learned heater
-    f = trip_stats(trips, veh, missing_mode="normal").features()  # summary: synthesised
-    keep = np.abs(f).sum(axis=1) > 0
-    w, _ = nnls(f[keep][:, tr].T / y[tr, None], np.ones(len(tr)))
-    out["nnls_physics_terms"] = f[keep][:, te].T @ w
-    return {k: v.tolist() for k, v in out.items()}
+    f_plan = trip_stats(trips, veh, missing_mode="normal").features()  # synthesised trace
+    f_trace = trip_stats(trips, veh, traces=m.traces).features()  # the logged traces
+
+    def nnls_of(f):
+        keep = np.abs(f).sum(axis=1) > 0
+
+        def fp(a, b):
+            w, _ = nnls(f[keep][:, a].T / y[a, None], np.ones(len(a)))
+            return f[keep][:, b].T @ w
+        return fp
+
+    fitters = {"linreg_summary": lambda a, b: LinearRegression().fit(xs[a], y[a]).predict(xs[b]),
+               "median_kwh_per_km": lambda a, b: np.median(y[a] / d[a]) * d[b],
+               "nnls_physics_terms": nnls_of(f_plan), "nnls_traced_terms": nnls_of(f_trace)}
+    points = {k: f(tr, te).tolist() for k, f in fitters.items()}
+    intervals = {k: conformal_baseline(f, y, date, tr, te, LEVEL) for k, f in fitters.items()}
+    return points, intervals
 
 
 def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
@@ -139,7 +154,9 @@ def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
             # planned trips flagged although the same trip with its trace is not
             "flagged_planned_only": int(np.sum(~planned["in_domain"].to_numpy(bool)
                                                & traced["in_domain"].to_numpy(bool))),
-            "baselines": _baselines(m, extra, np.sort(tr), te, vehicle, model.heater_kind_)}
+            **dict(zip(("baselines", "baseline_intervals"),
+                       _baselines(m, extra, np.sort(tr), te, vehicle, model.heater_kind_, date),
+                       strict=True))}
 
 
 def run(root: Path) -> dict:
@@ -162,6 +179,34 @@ def run(root: Path) -> dict:
     return res
 
 
+PLANNED_BASELINES = ("linreg_summary", "median_kwh_per_km", "nnls_physics_terms")
+"""Baselines that see what a planned trip has: its summary."""
+TRACED_BASELINES = (*PLANNED_BASELINES, "nnls_traced_terms")
+"""A traced trip's baselines may also use its logged trace."""
+CALIBRATED = 0.85
+"""A baseline interval counts as the best only with at least this coverage."""
+
+
+def _baseline_intervals(rows: list[dict], y: np.ndarray, s: dict) -> dict:
+    """Coverage and mean width / E of every baseline's conformal intervals, and the
+    hybrid's width over the narrowest calibrated one (planned and traced)."""
+    out = {}
+    for b in rows[0]["baseline_intervals"]:
+        for how in ("cv+", "cross"):
+            lo, hi = (np.concatenate([r["baseline_intervals"][b][how][c] for r in rows])
+                      for c in ("lo", "hi"))
+            out[f"{b} ({how})"] = {"coverage": float(np.mean((y >= lo) & (y <= hi))),
+                                   "width_rel": float(np.mean((hi - lo) / y))}
+    for mode, names in (("planned", PLANNED_BASELINES), ("traced", TRACED_BASELINES)):
+        ok = {k: v for k, v in out.items() if k.split(" (")[0] in names
+              and v["coverage"] >= CALIBRATED}
+        if ok:
+            best = min(ok, key=lambda k: ok[k]["width_rel"])
+            s[mode]["best_baseline"] = best
+            s[mode]["width_over_best_baseline"] = s[mode]["width_rel"] / ok[best]["width_rel"]
+    return out
+
+
 def _tables(res: dict) -> dict:
     out = {}
     for size, rows in res.items():
@@ -171,6 +216,7 @@ def _tables(res: dict) -> dict:
             p = np.concatenate([r["baselines"][b] for r in rows])
             s[b] = {"mape_pct": float(100 * np.mean(np.abs(p - y) / y)),
                     "bias_pct": float(100 * np.mean(p / y - 1))}
+        s["intervals"] = _baseline_intervals(rows, y, s)
         s["folds"] = [{k: v for k, v in r.items() if not isinstance(v, dict)} for r in rows]
         out[size] = s
     return out
@@ -207,6 +253,16 @@ def main(argv=None) -> int:
                   "|---|---|---|"]
         for b in ("linreg_summary", "median_kwh_per_km", "nnls_physics_terms"):
             lines.append(f"| {b} | {s[b]['mape_pct']:.2f} | {s[b]['bias_pct']:+.2f} |")
+        lines += ["", "| baseline conformal interval (relative residuals, date-grouped "
+                  "inner folds) | coverage | mean width / E |", "|---|---|---|"]
+        for b, r in s["intervals"].items():
+            lines.append(f"| {b} | {r['coverage']:.3f} | {r['width_rel']:.3f} |")
+        lines.append("")
+        for mode in ("planned", "traced"):
+            if "best_baseline" in s[mode]:
+                lines.append(f"Hybrid {mode} width over the narrowest calibrated baseline "
+                             f"({s[mode]['best_baseline']}): "
+                             f"**{s[mode]['width_over_best_baseline']:.2f}** (target <= 0.8).")
         lines += ["", "| fold | train | test | planned q90 | traced q90 | gap rate | "
                   "learned | shifted OOF trips | planned mean corrected | planned MAPE % | "
                   "traced MAPE % | flagged planned, not traced |",

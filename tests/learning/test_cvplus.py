@@ -145,3 +145,34 @@ def test_fit_groups_by_date_by_default(data):
         assert len(np.unique(fold[(d.date == g).to_numpy()])) == 1
     assert m.fit_info_["n_groups"] == 10
     assert HybridModel(**FAST).fit(d, seed=0, groups=None).fit_info_["n_groups"] == 40
+
+
+def test_new_fits_use_cross_conformal_and_old_files_keep_cv_plus(data, tmp_path):
+    """Issue 31: in the domain a new CV+ fit's interval is the final model's mu +- q s
+    with the pooled out-of-fold quantile; a file without the rule keeps the CV+ interval."""
+    m = HybridModel(**FAST).fit(data.head(40), seed=0, groups="day")
+    assert m.calibrator_.interval == "cross" and m.calibrator_.prediction_folds() == []
+    test = data.iloc[40:50].drop(columns=["energy_kwh"])
+    dist = m.predict_distribution(test, level=0.9)
+    out = m.predict_interval(test, 0.9)
+    ok = out["in_domain"].to_numpy(bool)
+    assert ok.any()
+    q = m.conformal_.quantile(0.9)
+    mu, sd = out["energy_kwh_pred"].to_numpy(float), dist.std() / dist.spread_factor
+    np.testing.assert_allclose(out["energy_kwh_hi"].to_numpy(float)[ok], (mu + q * sd)[ok],
+                               rtol=1e-6)
+    doc, arrays = m.calibrator_.to_arrays()
+    assert doc["cv_interval"] == "cross"
+    from hybridev.learning.calibrate import Calibrator
+
+    del doc["cv_interval"]  # a file saved before the rule existed
+    back = Calibrator().set_arrays(doc, arrays, learner=m.learner_,
+                                   posterior=m.physics_.posterior_)
+    assert back.interval == "cv+" and len(back.prediction_folds()) == 5
+    m.calibrator_ = back
+    wide = m.predict_interval(test, 0.9)
+    assert not np.allclose(wide["energy_kwh_hi"].to_numpy(float)[ok],
+                           out["energy_kwh_hi"].to_numpy(float)[ok])
+    with pytest.raises(ValueError, match="cv_interval"):
+        Calibrator().set_arrays({**doc, "cv_interval": "jackknife"}, arrays,
+                                learner=m.learner_, posterior=m.physics_.posterior_)
