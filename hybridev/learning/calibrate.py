@@ -84,6 +84,8 @@ class Calibrator:
         Mondrian bin of each calibration score.
     """
 
+    interval = "cv+"  # instances pickled before the rule existed (fleets) keep CV+
+
     def __init__(self, *, mondrian: bool = False, interval: str = "cross") -> None:
         if interval not in INTERVAL_RULES:
             raise ValueError(f"interval={interval!r}; allowed: {list(INTERVAL_RULES)}")
@@ -116,10 +118,6 @@ class Calibrator:
         cp = self.conformal_
         nets = self.fold_nets_ or []
         return nets if isinstance(cp, CVPlusConformal) and len(nets) == cp.n_folds else []
-
-    def prediction_folds(self) -> list:
-        """The fold ensembles the interval needs at prediction ([] under ``"cross"``)."""
-        return self.folds() if self.interval == "cv+" else []
 
     def fold_physics(self) -> list:
         """Each fold's physics (None: the model's) for :meth:`folds`."""

@@ -122,9 +122,9 @@ class _Parts:
         cal = self.calibrator
         if cal is None or not isinstance(cal.conformal_, CVPlusConformal):
             return [], []
-        nets = list(cal.prediction_folds())  # [] under the cross-conformal rule
-        if not nets:
+        if cal.interval != "cv+":  # cross-conformal: the fold models serve the fit only
             return [], []
+        nets = list(cal.fold_nets_ or [])
         return nets, list(cal.fold_physics_ or [None] * len(nets))
 
 

@@ -151,7 +151,7 @@ def test_new_fits_use_cross_conformal_and_old_files_keep_cv_plus(data, tmp_path)
     """Issue 31: in the domain a new CV+ fit's interval is the final model's mu +- q s
     with the pooled out-of-fold quantile; a file without the rule keeps the CV+ interval."""
     m = HybridModel(**FAST).fit(data.head(40), seed=0, groups="day")
-    assert m.calibrator_.interval == "cross" and m.calibrator_.prediction_folds() == []
+    assert m.calibrator_.interval == "cross" and len(m.calibrator_.folds()) == 5
     test = data.iloc[40:50].drop(columns=["energy_kwh"])
     dist = m.predict_distribution(test, level=0.9)
     out = m.predict_interval(test, 0.9)
@@ -168,7 +168,7 @@ def test_new_fits_use_cross_conformal_and_old_files_keep_cv_plus(data, tmp_path)
     del doc["cv_interval"]  # a file saved before the rule existed
     back = Calibrator().set_arrays(doc, arrays, learner=m.learner_,
                                    posterior=m.physics_.posterior_)
-    assert back.interval == "cv+" and len(back.prediction_folds()) == 5
+    assert back.interval == "cv+" and len(back.folds()) == 5
     m.calibrator_ = back
     wide = m.predict_interval(test, 0.9)
     assert not np.allclose(wide["energy_kwh_hi"].to_numpy(float)[ok],
