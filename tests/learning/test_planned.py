@@ -16,12 +16,13 @@ import pytest
 
 from hybridev import HybridModel, VehicleParams, make_trips, trace_energy_kwh
 from hybridev.core.errors import OutOfDomainWarning
+from hybridev.data.timeseries import as_traces
 from hybridev.learning import persist
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.domain import MISSING_INPUT_SCORE, TrainingDomain
 from hybridev.learning.persist import read_model_dir, write_model_dir
 from hybridev.learning.pipeline import raw_distributions
-from hybridev.learning.planned import PlannedTripCalibrator, conditions_of
+from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GAP_RATE_FLOOR, GapRate, fold_gaps
 
 TRUTH_CAR = VehicleParams.from_coastdown(150.0, 0.45, 0.028, mass_kg=1750.0)
@@ -356,3 +357,39 @@ def test_normaliser_adds_the_out_of_fold_relative_spread_and_old_state_has_none(
     np.testing.assert_allclose(before.interval(mu, s, 0.9), (mu - q * s, mu + q * s))
     with pytest.raises(ValueError, match="excess_rel"):
         PlannedTripCalibrator.from_arrays({**old, "excess_rel": np.array([-1.0])})
+
+
+def test_trips_given_a_grade_use_the_scores_with_the_logged_grade(tmp_path):
+    """Traces with elevation: the training trips are scored again with their logged net
+    grade (``graded_``); a planned trip given ``grade_pct`` takes that calibration, one
+    without the other; both survive save and load."""
+    train, ts = _truth(40, 2)
+    rng = np.random.default_rng(2)
+    slope = dict(zip(train["trip_id"], rng.uniform(-3.0, 3.0, len(train)), strict=True))
+    ts = ts.assign(grade_pct=ts["trip_id"].map(slope))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(**FAST).fit(train, seed=0, timeseries=ts, groups=None)
+    g = m.planned_.graded_
+    assert isinstance(g, PlannedTripCalibrator) and g.residuals_.shape == (len(train),)
+    assert not np.allclose(g.residuals_, m.planned_.residuals_)
+    got = net_grade_pct(train, as_traces(ts))
+    np.testing.assert_allclose(got, train["trip_id"].map(slope).to_numpy(), atol=0.05)
+    x = train.drop(columns=["energy_kwh"]).head(6).assign(temperature_c=15.0,
+                                                          avg_speed_kmh=45.0)
+    for part, xs in ((g, x.assign(grade_pct=[0.0, 1.0, 2.0, -1.0, 0.5, 0.0])),
+                     (m.planned_, x)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfDomainWarning)
+            out = m.predict_interval(xs, 0.9)
+            raw = raw_distributions(m, xs)[0][0]
+        half = (out.energy_kwh_hi - out.energy_kwh_pred).to_numpy()
+        c = part.correction(conditions_of(xs))
+        s_norm = np.hypot(raw.std() * c, part.excess_rel_ * raw.mean() * c)
+        np.testing.assert_allclose(half, part.quantile(0.9) * s_norm, rtol=1e-6)
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    np.testing.assert_array_equal(back.planned_.graded_.residuals_, g.residuals_)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        pd.testing.assert_frame_equal(back.predict_interval(x, 0.9), out)
