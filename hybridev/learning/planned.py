@@ -24,9 +24,9 @@ held inside the scored trips' speeds and temperatures.
 
 The model's own spread ``s`` (posterior, network members and noise, all
 learned on logged traces) does not know how far a synthesised trace is from
-this car's driving, so it is not the spread of a summary-only error: on M1 the
-out-of-fold summary-only errors are about 9 % of the energy where ``s`` says 5 %,
-and how ``s`` varies from trip to trip does not follow them. The normaliser is
+this car's driving, so it is not the spread of a summary-only error (on M1 the
+summary-only errors are about twice the traced ones, ``evaluation/planned_trips``,
+while ``s`` is the same). The normaliser is
 ``s' = sqrt(s^2 + (c mu)^2)``, with ``c`` the relative spread the scored trips
 show beyond ``s`` (moment estimate on the in-domain scored trips,
 ``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)``, ``excess_rel_``). On M1
@@ -50,8 +50,8 @@ without this state (older files, or fitted without traces) behave as before.
 
 A planned trip given a ``grade_pct`` is calibrated on scores of the training
 trips given their logged net grade (``graded_``), one without on scores without:
-each on the inputs it has (on M1 the grade cuts the summary-only error by a
-fifth, so one set of scores over-covers the one and under-covers the other).
+each on the inputs it has (the grade can cut the summary-only error a
+lot, so one set of scores would over-cover the one and under-cover the other).
 
 In the predictive path (:mod:`hybridev.learning.pipeline`) the calibrator is
 the component ``planned_`` (made by :func:`hybridev.learning.fitting.fit_planned`)
