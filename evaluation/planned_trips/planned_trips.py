@@ -96,7 +96,12 @@ def _summarise(rows: list[dict], key: str) -> dict:
     err = np.abs(p - y) / y
     width = (hi - lo) / y
     need = 2.0 * float(np.quantile(err, 0.9))
-    return {"n": int(y.size), "coverage": float(np.mean((y >= lo) & (y <= hi))),
+    flag = np.concatenate([r[key]["flagged"] for r in rows]).astype(bool)
+    cover = (y >= lo) & (y <= hi)
+    split = {f"{name}_{k}": (float(v[sel].mean()) if sel.any() else float("nan"))
+             for name, sel in (("in_domain", ~flag), ("flagged", flag))
+             for k, v in (("coverage", cover), ("width_rel", width), ("mape_pct", 100 * err))}
+    return {"n": int(y.size), "coverage": float(np.mean(cover)), **split,
             "mape_pct": float(100 * err.mean()), "bias_pct": float(100 * np.mean(p / y - 1)),
             "width_rel": float(width.mean()), "needed_width_rel": need,
             "sharpness_ratio": float(width.mean() / need),
@@ -257,6 +262,13 @@ def main(argv=None) -> int:
                          f"{r['bias_pct']:+.2f} | {r['width_rel']:.3f} | "
                          f"{r['needed_width_rel']:.3f} | {r['sharpness_ratio']:.2f} | "
                          f"{r['flagged']} |")
+        lines += ["", "| prediction | in domain: coverage | width / E | MAPE % | "
+                  "flagged: coverage | width / E | MAPE % |", "|---|---|---|---|---|---|---|"]
+        for mode in ("planned", "traced"):
+            r = s[mode]
+            lines.append(f"| {mode} | " + " | ".join(
+                f"{r[f'{g}_coverage']:.3f} | {r[f'{g}_width_rel']:.3f} | {r[f'{g}_mape_pct']:.2f}"
+                for g in ("in_domain", "flagged")) + " |")
         lines += ["", "| baseline (same held-out trips; the last one uses the logged traces) "
                   "| MAPE % | bias % |", "|---|---|---|"]
         for b in TRACED_BASELINES:
