@@ -100,8 +100,9 @@ def test_one_group_falls_back_to_trips_with_a_warning(data):
 def test_cv_plus_model_coverage_sweep_on_small_fleets():
     # The whole hybrid with CV+ on 20 and 40 trips of the structured truth (traces of the
     # truth independent of the model's: truth seeds >= 50, physics_seed 0): mean coverage
-    # of 90 % intervals over 8 training draws, 500 test trips each. CV+ guarantees about
-    # >= 0.8 (1 - 2 alpha); it is conservative at these sizes. Tolerance: [0.85, 0.99].
+    # of 90 % intervals over 8 training draws, 500 test trips each, with the CV+ scores
+    # and the cross-conformal interval of new fits (issue 31; CV+ itself guarantees about
+    # >= 0.8, 1 - 2 alpha). Tolerance: [0.85, 0.99].
     test = make_dataset(500, truth="structured", seed=49, n_steps=100)
     y = test["energy_kwh"].to_numpy()
     for n in (20, 40):
