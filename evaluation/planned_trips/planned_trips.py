@@ -22,7 +22,8 @@ trips are predicted
 Reported per mode (pooled over folds): 90 % coverage, MAPE, mean width over the
 measured energy, the sharpness ratio (mean width / E over ``2 * q90(|error| /
 E)``, the width that would cover 90 % of the same trips' own out-of-fold errors,
-in the same normalisation) and the number flagged out of the domain. Reviewer
+in the same normalisation) and the number flagged out of the domain; coverage,
+width and MAPE also of the in-domain and the flagged trips apart. Reviewer
 baselines fitted on the training folds' summaries only: ordinary least squares
 on distance, duration, ``d v^2``, ``duration * |T - 21 °C|`` and elevation gain
 and loss (as ``evaluation/real_weather``); distance times the median kWh/km;
