@@ -33,7 +33,7 @@ from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode
 from hybridev.learning.pipeline import raw_distributions
-from hybridev.learning.planned import PlannedTripCalibrator, conditions_of
+from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GapRate, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
 
@@ -211,8 +211,9 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     most training trips had a logged trace (``domain_.needs_trace``): the trips the
     conformal step scored (CV+: every trip by the fold model that did not see its day;
     split: the held-out trips by the final model) are predicted again *without* their
-    traces, against their measured energy; the domain is then returned with
-    ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
+    traces, against their measured energy (and, when the traces log elevation, again
+    with their logged net grade: ``planned.graded_``, for planned trips given a
+    ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
     fitted) without, each against the trip's gap to its fold's training domain. Without
     a conformal step: ``(None, None, domain)``.
@@ -233,21 +234,29 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     gaps, interp = [g0[idx]], [h0[idx]]  # beyond the fold's conditions / between them
     planned = None
     if traces is not None and domain.needs_trace:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # OutOfDomainWarning of the scored trips
-            if cv:
-                dists = raw_distributions(model, good, None, seed=int(seed), nets=cv,
-                                          physics=cal.fold_physics_ or None)[0]
-                mu = np.stack([d.mean() for d in dists])[fold, idx]
-                sd = np.stack([d.std() for d in dists])[fold, idx]
-            else:
-                dist = raw_distributions(model, good.iloc[idx], None, seed=int(seed))[0][0]
-                mu, sd = dist.mean(), dist.std()
+        def scored(trips):  # the scored trips predicted from their summaries
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # OutOfDomainWarning of the scored trips
+                if cv:
+                    dists = raw_distributions(model, trips, None, seed=int(seed), nets=cv,
+                                              physics=cal.fold_physics_ or None)[0]
+                    return (np.stack([d.mean() for d in dists])[fold, idx],
+                            np.stack([d.std() for d in dists])[fold, idx])
+                dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
+                return dist.mean(), dist.std()
+
+        def calibrator(trips):
+            mu, sd = scored(trips)
+            return PlannedTripCalibrator().fit(
+                e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
+                conditions=conditions_of(trips.iloc[idx]), fold=fold[idx] if cv else None)
+
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))
-        planned = PlannedTripCalibrator().fit(
-            e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
-            conditions=conditions_of(good.iloc[idx]), fold=fold[idx] if cv else None)
+        planned = calibrator(good)
+        grade = None if "grade_pct" in good.columns else net_grade_pct(good, traces)
+        if grade is not None:  # planned trips given a grade: scored with the logged one
+            planned.graded_ = calibrator(good.assign(grade_pct=grade))
         domain = dataclasses.replace(domain, needs_trace=False)
         scores.append(planned.residuals_)
         gaps.append(g_plan)

@@ -122,6 +122,8 @@ class _Parts:
         cal = self.calibrator
         if cal is None or not isinstance(cal.conformal_, CVPlusConformal):
             return [], []
+        if cal.interval != "cv+":  # cross-conformal: the fold models serve the fit only
+            return [], []
         nets = list(cal.fold_nets_ or [])
         return nets, list(cal.fold_physics_ or [None] * len(nets))
 

@@ -14,43 +14,53 @@ its own scores, learned at fit on the training trips themselves:
 * **split fits**: the held-out calibration trips are predicted without their
   traces by the final model.
 
-A synthesised trace is smoother than how a given car is driven (idling,
-stop-and-go at low mean speed), so summary-only predictions are biased in a way
-that depends on the conditions. The calibrator learns a multiplicative
-correction ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` mean speed in km/h, ``T``
-in °C) by ridge regression of the out-of-fold log ratios ``ln(E / mu)``; it
-scales the whole summary-only distribution (mean and spread). The scores are
-*cross-fitted*: a trip's score uses the correction fitted on the other folds'
-trips only, so that the calibration stays out of sample; and the correction is
-kept only when, so cross-fitted, it lowers the mean absolute log error of the
-scored trips by at least 10 % (else ``coef_`` is zero: no correction); the
-speed and temperature are held inside those of the scored trips (no
-extrapolation of the correction).
+A synthesised trace is smoother than how a given car is driven, so summary-only
+predictions may be biased by conditions: a multiplicative correction
+``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` km/h, ``T`` °C) is ridge-fitted to the
+out-of-fold ``ln(E / mu)`` and scales the summary-only distribution. It is
+cross-fitted (a trip's score uses the correction of the other folds), kept only
+when so it cuts the mean absolute log error by 10 % (else ``coef_`` is zero) and
+held inside the scored trips' speeds and temperatures.
 
-The signed normalised scores ``(E - mu) / s`` (``mu`` and ``s`` the corrected
+The model's own spread ``s`` (posterior, network members and noise, all
+learned on logged traces) does not know how far a synthesised trace is from
+this car's driving, so it is not the spread of a summary-only error (on M1 the
+summary-only errors are about twice the traced ones, ``evaluation/planned_trips``,
+while ``s`` is the same). The normaliser is
+``s' = sqrt(s^2 + (c mu)^2)``, with ``c`` the relative spread the scored trips
+show beyond ``s`` (moment estimate on the in-domain scored trips,
+``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)``, ``excess_rel_``). On M1
+(``evaluation/planned_trips``) it cut the mean planned width at the same
+coverage (sharpness ratio about 1.3 with ``s`` alone).
+
+The signed normalised scores ``(E - mu) / s'`` (``mu`` and ``s`` the corrected
 summary-only predictive mean and standard deviation of the scoring model) make
 a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
-conformal interval ``mu +- q s`` with the final model's summary-only ``mu``
-and ``s`` and ``q`` the conformal quantile of the scores of the scored trips
+conformal interval ``mu +- q s'`` with the final model's summary-only ``mu``
+and ``s'`` and ``q`` the conformal quantile of the scores of the scored trips
 *inside their fold's training domain* (``fold_gaps <= 1``); trips outside it
 teach the widening rate instead (:mod:`hybridev.learning.shift`).
 :meth:`HybridModel.predict_distribution` scales the spread of a planned trip
-by :meth:`PlannedTripCalibrator.spread_factor` (range and charging use it).
+by :meth:`PlannedTripCalibrator.spread_factor` times ``s' / s`` (range and charging
+use it).
 
 A trip is not out of the domain because it lacks a trace: with a calibrator
 the model's domain is recorded with ``needs_trace=False``. Models saved
 without this state (older files, or fitted without traces) behave as before.
 
+A planned trip given a ``grade_pct`` is calibrated on scores of the training
+trips given their logged net grade (``graded_``), one without on scores without:
+each on the inputs it has (the grade can cut the summary-only error a
+lot, so one set of scores would over-cover the one and under-cover the other).
+
 In the predictive path (:mod:`hybridev.learning.pipeline`) the calibrator is
-the component ``planned_`` of the model, made by
-:func:`hybridev.learning.fitting.fit_planned`. Its trips are those the
-:class:`~hybridev.learning.steps.DomainAssessment` finds without a logged trace
-(``has_trace``). It acts once, right after the
+the component ``planned_`` (made by :func:`hybridev.learning.fitting.fit_planned`)
+for the trips the :class:`~hybridev.learning.steps.DomainAssessment` finds
+without a logged trace. It acts once, right after the
 :class:`~hybridev.learning.calibrate.Calibrator` (step 5), on those rows only:
-:meth:`PlannedTripCalibrator.calibrate` scales their raw prediction by the mean
-correction and gives them ``mu +- q s``; :meth:`PlannedTripCalibrator.spread`
-does the same for ``predict_distribution``; :meth:`PlannedTripCalibrator.correct_point`
-scales ``predict``'s energy.
+:meth:`~PlannedTripCalibrator.calibrate` (their mean correction and ``mu +- q s'``),
+:meth:`~PlannedTripCalibrator.spread` (``predict_distribution``),
+:meth:`~PlannedTripCalibrator.correct_point` (``predict``).
 """
 
 from __future__ import annotations
@@ -64,7 +74,7 @@ from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import raw_prediction
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
 
-__all__ = ["PlannedTripCalibrator", "conditions_of"]
+__all__ = ["PlannedTripCalibrator", "conditions_of", "net_grade_pct"]
 
 
 @dataclasses.dataclass
@@ -81,6 +91,15 @@ class PlannedTripCalibrator:
     conformal_ : NormalizedConformal
         The scores used for intervals: those with ``gap_ <= 1`` when at least
         :data:`MIN_INSIDE` of them, else all.
+    graded_ : PlannedTripCalibrator or None
+        The same calibration with the scored trips given their logged net grade
+        (``grade_pct``): it serves the planned trips given a ``grade_pct``, this one
+        those without (None: this one serves both; older files, or traces without
+        elevation).
+    excess_rel_ : float
+        Relative spread ``c`` of the summary-only errors beyond the model's own
+        spread (dimensionless, >= 0; 0 in files saved before it existed): the scores
+        are normalised by ``s' = sqrt(s^2 + (c mu)^2)``.
 
     Examples
     --------
@@ -113,6 +132,7 @@ class PlannedTripCalibrator:
             consecutive trips).
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+        self.graded_ = None  # set by the fit (hybridev.learning.fitting.fit_planned)
         self.coef_ = np.zeros(len(_CORRECTION_TERMS))
         self.conditions_range_ = np.array([[0.0, -273.15], [np.inf, np.inf]])
         if conditions is not None:
@@ -132,19 +152,29 @@ class PlannedTripCalibrator:
                 mean, std = mean * factor, std * factor
                 self.coef_ = _ridge(c, lr)
                 self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
-        cp = NormalizedConformal.fit(y, mean, std)
-        g = np.zeros(cp.n_calibration) if gap is None else np.asarray(gap, float)
-        if g.shape != cp.residuals.shape:
-            raise ValueError(f"gap must have one value per trip ({cp.n_calibration}); "
+        g = np.zeros(len(y)) if gap is None else np.asarray(gap, float)
+        if g.shape != y.shape:
+            raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
+        self.excess_rel_ = _excess_rel(y, mean, std, self._inside(g))
+        cp = NormalizedConformal.fit(y, mean, self._normaliser(mean, std))
         self.residuals_, self.gap_ = cp.residuals, g
         self._build()
         return self
 
+    def _inside(self, gap: np.ndarray) -> np.ndarray:
+        """Scored trips (n,) bool behind the intervals: in their fold's domain when at
+        least :data:`MIN_INSIDE` are, else all."""
+        inside = gap <= 1.0
+        return inside if inside.sum() >= self.MIN_INSIDE else np.ones(len(gap), dtype=bool)
+
     def _build(self) -> None:
-        inside = self.gap_ <= 1.0
-        r = self.residuals_[inside] if inside.sum() >= self.MIN_INSIDE else self.residuals_
-        self.conformal_ = NormalizedConformal(r)
+        self.conformal_ = NormalizedConformal(self.residuals_[self._inside(self.gap_)])
+
+    def _normaliser(self, mean, std) -> np.ndarray:
+        """Spread of a summary-only prediction (kWh): ``sqrt(s^2 + (c mu)^2)``."""
+        mean, std = np.asarray(mean, float), np.asarray(std, float)
+        return np.sqrt(std**2 + (self.excess_rel_ * mean) ** 2)
 
     def correction(self, conditions) -> np.ndarray:
         """Multiplicative mean correction per trip, shape (n,), from (n, 2) conditions.
@@ -166,16 +196,16 @@ class PlannedTripCalibrator:
         return self.conformal_.quantile(level)
 
     def spread_factor(self, level: float) -> float:
-        """Multiplier on the predictive spread matching :meth:`quantile`."""
+        """Multiplier on the normalised spread ``s'`` matching :meth:`quantile`."""
         return self.conformal_.spread_factor(level)
 
     def interval(self, mean, std, level: float) -> tuple[np.ndarray, np.ndarray]:
-        """``mean +- q std`` (kWh), shape of ``mean``."""
-        return self.conformal_.interval(mean, std, level)
+        """``mean +- q s'`` (kWh), shape of ``mean``, with ``s' = sqrt(std^2 + (c mean)^2)``."""
+        return self.conformal_.interval(mean, self._normaliser(mean, std), level)
 
     def lower_bound(self, mean, std, level: float) -> np.ndarray:
-        """One-sided conformal lower bound ``mean - q' std`` (kWh)."""
-        return self.conformal_.lower_bound(mean, std, level)
+        """One-sided conformal lower bound ``mean - q' s'`` (kWh)."""
+        return self.conformal_.lower_bound(mean, self._normaliser(mean, std), level)
 
     # -- the predictive path (step 5, planned rows) ---------------------------------------
     def _factor(self, table: pd.DataFrame, rows: np.ndarray) -> np.ndarray:
@@ -184,8 +214,27 @@ class PlannedTripCalibrator:
         f[rows] = self.correction(conditions_of(table.iloc[np.flatnonzero(rows)]))
         return f
 
+    def _parts(self, grade, rows: np.ndarray) -> list:
+        """``[(calibrator, rows), ...]``: the trips given a grade (finite ``grade_pct``,
+        (n_trips,) or None) go to ``graded_`` when the model has it, the others to this
+        calibrator."""
+        graded = getattr(self, "graded_", None)
+        if graded is None or grade is None:
+            return [(self, rows)]
+        has = np.isfinite(np.asarray(grade, float))
+        return [(self, rows & ~has), (graded, rows & has)]
+
+    @staticmethod
+    def _grade_of(table: pd.DataFrame):
+        return table["grade_pct"].to_numpy(float) if "grade_pct" in table.columns else None
+
     def correct_point(self, energy: np.ndarray, columns: dict, rows: np.ndarray) -> np.ndarray:
         """``predict``'s energy (n_trips,), kWh, with ``rows`` scaled by the mean correction."""
+        for part, r in self._parts(columns.get("grade_pct"), np.asarray(rows, bool)):
+            energy = part._correct_point(energy, columns, r) if r.any() else energy
+        return energy
+
+    def _correct_point(self, energy: np.ndarray, columns: dict, rows: np.ndarray) -> np.ndarray:
         cond = np.column_stack([columns["avg_speed_kmh"], columns["temperature_c"]])[rows]
         out = np.array(energy, float, copy=True)
         out[rows] = out[rows] * self.correction(cond)
@@ -214,14 +263,24 @@ class PlannedTripCalibrator:
     def calibrate(self, raw: RawPrediction, cal: CalibratedInterval, level: float,
                   rows: np.ndarray) -> tuple[RawPrediction, CalibratedInterval]:
         """Step 5 for planned trips: ``(raw, interval)`` with ``rows`` corrected
-        (:meth:`correct`) and given ``mu +- q s`` (and the one-sided ``mu - q' s``).
+        (:meth:`correct`) and given ``mu +- q s'`` (and the one-sided ``mu - q' s'``),
+        the trips given a grade by ``graded_`` (when the model has it)."""
+        for part, r in self._parts(self._grade_of(raw.table), np.asarray(rows, bool)):
+            if r.any():
+                raw, cal = part._calibrate(raw, cal, level, r)
+        return raw, cal
+
+    def _calibrate(self, raw: RawPrediction, cal: CalibratedInterval, level: float,
+                   rows: np.ndarray) -> tuple[RawPrediction, CalibratedInterval]:
+        """This calibrator's step 5 on ``rows``: corrected (:meth:`correct`) and given
+        ``mu +- q s'`` (and the one-sided ``mu - q' s'``).
 
         The other rows keep ``cal``'s interval; ``quantile`` and ``quantile_one`` of
         the result are per trip (NaN where the model has no conformal step).
         """
         q, q1 = self._level(level)
         raw = self.correct(raw, rows)
-        mu, sd = raw.mean, raw.std
+        mu, sd = raw.mean, np.where(rows, self._normaliser(raw.mean, raw.std), raw.std)
         n = len(mu)
         qs = np.full(n, np.nan if cal.quantile is None else 0.0)
         q1s = np.full(n, np.nan if cal.quantile_one is None else 0.0)
@@ -239,21 +298,35 @@ class PlannedTripCalibrator:
                                        spread_factor=cal.spread_factor, quantile=qs,
                                        quantile_one=q1s)
 
-    def spread(self, raw: RawPrediction, factor: float, level: float, rows: np.ndarray
+    def spread(self, raw: RawPrediction, factor, level: float, rows: np.ndarray
                ) -> tuple[RawPrediction, np.ndarray]:
         """Step 5 of ``predict_distribution`` for planned trips: ``(raw, factor)`` with
-        ``rows`` corrected and given this calibrator's spread factor (per trip)."""
+        ``rows`` corrected and given the spread factor of their calibrator (per trip)."""
+        f = np.array(np.broadcast_to(np.asarray(factor, float), (len(raw.mean),)), float)
+        for part, r in self._parts(self._grade_of(raw.table), np.asarray(rows, bool)):
+            if r.any():
+                raw, f = part._spread(raw, f, level, r)
+        return raw, f
+
+    def _spread(self, raw: RawPrediction, factor: np.ndarray, level: float, rows: np.ndarray
+                ) -> tuple[RawPrediction, np.ndarray]:
+        """This calibrator's step 5 of ``predict_distribution`` on ``rows``."""
         fp = self.spread_factor(level)
         if not np.isfinite(fp):
             self._level(level)  # raises
-        f = np.full(len(raw.mean), float(factor))
-        f[rows] = max(fp, 1e-6)
-        return self.correct(raw, rows), f
+        raw = self.correct(raw, rows)
+        f = np.array(factor, float, copy=True)
+        sd = np.maximum(raw.std[rows], 1e-12)  # the spread q s' of the interval, as q' s
+        f[rows] = np.maximum(fp * self._normaliser(raw.mean[rows], sd) / sd, 1e-6)
+        return raw, f
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """State for the saved model."""
         return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
-                "conditions_range": self.conditions_range_}
+                "conditions_range": self.conditions_range_,
+                "excess_rel": np.array([self.excess_rel_]),
+                **{f"graded.{k}": v for k, v in (self.graded_.to_arrays().items()
+                                                  if self.graded_ is not None else ())}}
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
@@ -273,8 +346,15 @@ class PlannedTripCalibrator:
         if rng_.shape != (2, 2):
             raise ValueError(f"planned-trip calibration: conditions_range must be (2, 2); "
                              f"got {rng_.shape}")
+        c = np.asarray(a.get("excess_rel", [0.0]), float)  # older files: none (0)
+        if c.shape != (1,) or not np.isfinite(c[0]) or c[0] < 0:
+            raise ValueError(f"planned-trip calibration: excess_rel must be one finite value "
+                             f">= 0; got {c!r}")
         out = cls()
         out.residuals_, out.gap_, out.coef_, out.conditions_range_ = r, g, coef, rng_
+        out.excess_rel_ = float(c[0])
+        graded = {k[len("graded."):]: v for k, v in a.items() if k.startswith("graded.")}
+        out.graded_ = cls.from_arrays(graded) if graded else None  # older files: none
         out._build()
         return out
 
@@ -282,6 +362,14 @@ class PlannedTripCalibrator:
 _CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
 _RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
 _MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
+
+
+def _excess_rel(y: np.ndarray, mean: np.ndarray, std: np.ndarray, inside: np.ndarray
+                ) -> float:
+    """Relative spread ``c`` the scored trips' errors show beyond the model's own:
+    ``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)`` over ``inside`` (moment estimate)."""
+    mu = np.maximum(np.abs(mean[inside]), 1e-9)
+    return float(np.sqrt(max(np.mean(((y - mean) ** 2 - std**2)[inside] / mu**2), 0.0)))
 
 
 def _design(conditions: np.ndarray) -> np.ndarray:
@@ -308,3 +396,25 @@ def conditions_of(table: pd.DataFrame) -> np.ndarray:
     return np.column_stack([table["avg_speed_kmh"].to_numpy(float),
                             table["temperature_c"].to_numpy(float)])
 
+
+
+def net_grade_pct(trips: pd.DataFrame, traces) -> np.ndarray | None:
+    """Net grade (%) of each trip over its logged trace, ``100 * rise / distance``,
+    shape (n_trips,); None when no trip's trace has a grade (no elevation logged).
+
+    What a planned trip's ``grade_pct`` says (the net climb over the distance), so the
+    calibration of planned trips given a grade scores the training trips with it.
+    Trips without a trace get 0.
+    """
+    start, trip = traces.intervals()
+    dt = traces.t_s[start + 1] - traces.t_s[start]
+    dx = 0.5 * (traces.speed_mps[start] + traces.speed_mps[start + 1]) * dt
+    dz = dx * np.tan(0.5 * (traces.grade_rad[start] + traces.grade_rad[start + 1]))
+    n = len(traces)
+    if not np.any(traces.grade_rad):
+        return None
+    grade = 100.0 * np.bincount(trip, dz, minlength=n) / np.maximum(
+        np.bincount(trip, dx, minlength=n), 1e-9)
+    pos = pd.Index(traces.trip_id).get_indexer(trips["trip_id"].astype(object))
+    out = np.where(pos >= 0, grade[np.maximum(pos, 0)], 0.0)
+    return np.clip(out, -30.0, 30.0)

@@ -100,8 +100,9 @@ def test_one_group_falls_back_to_trips_with_a_warning(data):
 def test_cv_plus_model_coverage_sweep_on_small_fleets():
     # The whole hybrid with CV+ on 20 and 40 trips of the structured truth (traces of the
     # truth independent of the model's: truth seeds >= 50, physics_seed 0): mean coverage
-    # of 90 % intervals over 8 training draws, 500 test trips each. CV+ guarantees about
-    # >= 0.8 (1 - 2 alpha); it is conservative at these sizes. Tolerance: [0.85, 0.99].
+    # of 90 % intervals over 8 training draws, 500 test trips each, with the CV+ scores
+    # and the cross-conformal interval of new fits (issue 31; CV+ itself guarantees about
+    # >= 0.8, 1 - 2 alpha). Tolerance: [0.85, 0.99].
     test = make_dataset(500, truth="structured", seed=49, n_steps=100)
     y = test["energy_kwh"].to_numpy()
     for n in (20, 40):
@@ -145,3 +146,34 @@ def test_fit_groups_by_date_by_default(data):
         assert len(np.unique(fold[(d.date == g).to_numpy()])) == 1
     assert m.fit_info_["n_groups"] == 10
     assert HybridModel(**FAST).fit(d, seed=0, groups=None).fit_info_["n_groups"] == 40
+
+
+def test_new_fits_use_cross_conformal_and_old_files_keep_cv_plus(data, tmp_path):
+    """Issue 31: in the domain a new CV+ fit's interval is the final model's mu +- q s
+    with the pooled out-of-fold quantile; a file without the rule keeps the CV+ interval."""
+    m = HybridModel(**FAST).fit(data.head(40), seed=0, groups="day")
+    assert m.calibrator_.interval == "cross" and len(m.calibrator_.folds()) == 5
+    test = data.iloc[40:50].drop(columns=["energy_kwh"])
+    dist = m.predict_distribution(test, level=0.9)
+    out = m.predict_interval(test, 0.9)
+    ok = out["in_domain"].to_numpy(bool)
+    assert ok.any()
+    q = m.conformal_.quantile(0.9)
+    mu, sd = out["energy_kwh_pred"].to_numpy(float), dist.std() / dist.spread_factor
+    np.testing.assert_allclose(out["energy_kwh_hi"].to_numpy(float)[ok], (mu + q * sd)[ok],
+                               rtol=1e-6)
+    doc, arrays = m.calibrator_.to_arrays()
+    assert doc["cv_interval"] == "cross"
+    from hybridev.learning.calibrate import Calibrator
+
+    del doc["cv_interval"]  # a file saved before the rule existed
+    back = Calibrator().set_arrays(doc, arrays, learner=m.learner_,
+                                   posterior=m.physics_.posterior_)
+    assert back.interval == "cv+" and len(back.folds()) == 5
+    m.calibrator_ = back
+    wide = m.predict_interval(test, 0.9)
+    assert not np.allclose(wide["energy_kwh_hi"].to_numpy(float)[ok],
+                           out["energy_kwh_hi"].to_numpy(float)[ok])
+    with pytest.raises(ValueError, match="cv_interval"):
+        Calibrator().set_arrays({**doc, "cv_interval": "jackknife"}, arrays,
+                                learner=m.learner_, posterior=m.physics_.posterior_)

@@ -16,11 +16,13 @@ import pytest
 
 from hybridev import HybridModel, VehicleParams, make_trips, trace_energy_kwh
 from hybridev.core.errors import OutOfDomainWarning
+from hybridev.data.timeseries import as_traces
 from hybridev.learning import persist
+from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.domain import MISSING_INPUT_SCORE, TrainingDomain
 from hybridev.learning.persist import read_model_dir, write_model_dir
 from hybridev.learning.pipeline import raw_distributions
-from hybridev.learning.planned import PlannedTripCalibrator, conditions_of
+from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GAP_RATE_FLOOR, GapRate, fold_gaps
 
 TRUTH_CAR = VehicleParams.from_coastdown(150.0, 0.45, 0.028, mass_kg=1750.0)
@@ -146,7 +148,14 @@ def test_predict_distribution_uses_the_planned_factor(fitted):
         dt = m.predict_distribution(x, level=0.9, timeseries=test_ts)
     f = np.broadcast_to(d.spread_factor, (20,))
     ok = m.domain_.gap(x) <= 1.0
-    np.testing.assert_allclose(f[ok], m.planned_.spread_factor(0.9))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        raw = raw_distributions(m, x)[0][0]
+    corr = m.planned_.correction(conditions_of(x))
+    mu, sd = raw.mean() * corr, raw.std() * corr  # the spread s' of the interval, as q' s
+    s_norm = np.sqrt(sd**2 + (m.planned_.excess_rel_ * mu) ** 2)
+    np.testing.assert_allclose(f[ok], (m.planned_.spread_factor(0.9) * s_norm / sd)[ok],
+                               rtol=1e-9)
     ft = np.broadcast_to(dt.spread_factor, (20,))
     np.testing.assert_allclose(ft[ok], m.conformal_.spread_factor(0.9))
 
@@ -178,7 +187,8 @@ def test_colder_trip_is_flagged_and_wider(fitted):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         raw = raw_distributions(m, cold)[0][0]  # steps 1-4; the planned mean correction:
-    sd = raw.std()[0] * m.planned_.correction(conditions_of(cold))[0]
+    corr = m.planned_.correction(conditions_of(cold))[0]
+    sd = float(np.hypot(raw.std()[0] * corr, m.planned_.excess_rel_ * raw.mean()[0] * corr))
     need = m.planned_.quantile(0.9) * sd * m.gap_rate_.inflation(gap)[0]
     assert out.energy_kwh_hi[1] - out.energy_kwh_pred[1] >= need * (1 - 1e-9)
 
@@ -319,3 +329,67 @@ def test_planned_trips_pass_the_components_once_in_order(fitted):
         "planned", "ood", "physical"]
     assert stages(lambda: m.predict(x)) == ["components", "physics_stage", "domain", "residual",
                                             "planned", "physical"]
+
+
+def test_normaliser_adds_the_out_of_fold_relative_spread_and_old_state_has_none():
+    """Summary-only errors of 10 % where the model's own spread says 2 %: the
+    normaliser learns c about 0.1, the intervals cover and are not wider than they need;
+    state saved without ``excess_rel`` keeps ``mu +- q s``."""
+    rng = np.random.default_rng(7)
+    n = 400
+    mu = rng.uniform(2.0, 20.0, n)
+    s = 0.02 * mu * rng.uniform(0.5, 2.0, n)  # a spread that does not follow the errors
+    y = mu * (1.0 + 0.1 * rng.standard_normal(n))
+    cal = PlannedTripCalibrator().fit(y, mu, s)
+    assert 0.08 < cal.excess_rel_ < 0.12
+    y2 = mu * (1.0 + 0.1 * rng.standard_normal(n))
+    lo, hi = cal.interval(mu, s, 0.9)
+    assert 0.86 <= np.mean((y2 >= lo) & (y2 <= hi)) <= 0.94
+    plain = NormalizedConformal.fit(y, mu, s)  # s alone: wider at the same level
+    plo, phi = plain.interval(mu, s, 0.9)
+    assert np.mean(hi - lo) < 0.97 * np.mean(phi - plo)
+    back = PlannedTripCalibrator.from_arrays(cal.to_arrays())
+    assert back.excess_rel_ == cal.excess_rel_
+    old = {k: v for k, v in cal.to_arrays().items() if k != "excess_rel"}
+    before = PlannedTripCalibrator.from_arrays(old)
+    assert before.excess_rel_ == 0.0
+    q = before.quantile(0.9)
+    np.testing.assert_allclose(before.interval(mu, s, 0.9), (mu - q * s, mu + q * s))
+    with pytest.raises(ValueError, match="excess_rel"):
+        PlannedTripCalibrator.from_arrays({**old, "excess_rel": np.array([-1.0])})
+
+
+def test_trips_given_a_grade_use_the_scores_with_the_logged_grade(tmp_path):
+    """Traces with elevation: the training trips are scored again with their logged net
+    grade (``graded_``); a planned trip given ``grade_pct`` takes that calibration, one
+    without the other; both survive save and load."""
+    train, ts = _truth(40, 2)
+    rng = np.random.default_rng(2)
+    slope = dict(zip(train["trip_id"], rng.uniform(-3.0, 3.0, len(train)), strict=True))
+    ts = ts.assign(grade_pct=ts["trip_id"].map(slope))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(**FAST).fit(train, seed=0, timeseries=ts, groups=None)
+    g = m.planned_.graded_
+    assert isinstance(g, PlannedTripCalibrator) and g.residuals_.shape == (len(train),)
+    assert not np.allclose(g.residuals_, m.planned_.residuals_)
+    got = net_grade_pct(train, as_traces(ts))
+    np.testing.assert_allclose(got, train["trip_id"].map(slope).to_numpy(), atol=0.05)
+    x = train.drop(columns=["energy_kwh"]).head(6).assign(temperature_c=15.0,
+                                                          avg_speed_kmh=45.0)
+    for part, xs in ((g, x.assign(grade_pct=[0.0, 1.0, 2.0, -1.0, 0.5, 0.0])),
+                     (m.planned_, x)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfDomainWarning)
+            out = m.predict_interval(xs, 0.9)
+            raw = raw_distributions(m, xs)[0][0]
+        half = (out.energy_kwh_hi - out.energy_kwh_pred).to_numpy()
+        c = part.correction(conditions_of(xs))
+        s_norm = np.hypot(raw.std() * c, part.excess_rel_ * raw.mean() * c)
+        np.testing.assert_allclose(half, part.quantile(0.9) * s_norm, rtol=1e-6)
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    np.testing.assert_array_equal(back.planned_.graded_.residuals_, g.residuals_)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        pd.testing.assert_frame_equal(back.predict_interval(x, 0.9), out)
