@@ -134,8 +134,23 @@ class OutOfDomainSpread:
         return sd_ood
 
     def _raw_sd(self, assessment, raw: RawPrediction) -> tuple[np.ndarray, np.ndarray]:
-        ok = (np.ones(len(raw.mean), dtype=bool) if assessment is None
-              else assessment.in_domain)
+        """``(ok, sd_ood)``: the trips whose interval is not floored at ``mu +- z
+        sd_ood``, and ``sd_ood`` (kWh).
+
+        With a rate learned from the fit's own shifted trips (``rate.learned_``), a trip
+        out of the domain only for its intensive conditions is ``ok``: the learned rate
+        says how much wider its conformal interval ``mu +- q s`` must be
+        (:meth:`_rate_widened`), and the raw spread is not stacked on it. The floor stays
+        for trips lacking a mode or (with ``trace_gap_rel``) their trace, and with a
+        fixed rate.
+        """
+        n = len(raw.mean)
+        ok = np.ones(n, dtype=bool) if assessment is None else assessment.in_domain
+        if assessment is not None and getattr(self.rate, "learned_", False):
+            other = np.asarray(assessment.no_mode, bool) & np.ones(n, dtype=bool)
+            if self.trace_gap_rel > 0:
+                other = other | np.asarray(assessment.no_trace, bool)
+            ok = ok | ~other
         return ok, self.sd(assessment, raw.table, raw.mean, raw.std, raw.var_draws,
                            excess_var=raw.excess_var, mode_means=raw.mode_means)
 
@@ -156,6 +171,8 @@ class OutOfDomainSpread:
         lo_one = np.where(ok, cal.lo_one, np.minimum(cal.lo_one, mu - z1 * sd_ood))
         wide = CalibratedInterval(mean=mu, std=sd, lo=lo, hi=hi, lo_one=lo_one,
                                   spread_factor=cal.spread_factor, quantile=cal.quantile)
+        if self.rate is not None and assessment is not None:
+            sd = sd * self.rate_inflation(assessment)  # the learned widening, as a spread
         return wide, np.where(ok, sd, np.maximum(sd, sd_ood))
 
     def rate_inflation(self, a: DomainAssessment) -> np.ndarray:
