@@ -18,7 +18,8 @@ and discrepancy); then, without the networks:
   ``disc_evidence_x0.1`` / ``x0.3`` (the evidence's shrinkage times a fixed factor: a
   tuned constant, shown as a diagnostic only);
 * **residual variants** on the default physics part, relative residual, the networks'
-  11 standardised inputs (``lin``) or those plus climb and descent per km (``lin+elev``):
+  11 standardised inputs (``lin``), those plus climb and descent per km (``lin+elev``),
+  and plus the parking time before the trip (``lin+elev+parked``, min, capped at 600):
   ridge at fixed penalties 1, 10, 100 (diagnostics: a fixed penalty is a tuned constant),
   ridge with the penalty chosen by grouped 5-fold CV on the training days' in-sample
   residuals (``ridge_cv_insample``) or on their **out-of-fold** residuals (5 inner
@@ -163,7 +164,10 @@ def run(vehicle, m, extra) -> dict:
         ep = table["energy_kwh_physics"].to_numpy(float)
         x = trip_features(table, FEATURE_NAMES)
         r_in, r_oof = (y[tr] - ep[tr]) / ep[tr], (y[tr] - p_oof) / p_oof
-        for name, xx in (("lin", x), ("lin+elev", np.column_stack([x, elev]))):
+        parked = np.full(len(y), 600.0) if "parked_min" not in trips else np.nan_to_num(
+            np.minimum(trips["parked_min"].to_numpy(float), 600.0), nan=600.0)
+        for name, xx in (("lin", x), ("lin+elev", np.column_stack([x, elev])),
+                         ("lin+elev+parked", np.column_stack([x, elev, parked]))):
             for key, v in residual_variants(xx[tr], xx[te], r_in, r_oof, y[tr], p_oof, d[tr],
                                             codes, ep[te]).items():
                 res[f"{key} ({name})"] = v

@@ -109,3 +109,31 @@ def test_gate_with_the_line_round_trips_and_old_documents_load():
     np.testing.assert_array_equal(old.apply(np.ones((2, 3))), np.full((2, 3), 0.5))
     with pytest.raises(ValueError, match="learner"):
         ResidualGate().set_arrays({"weight": 0.5, "learner": "forest"})
+
+
+@pytest.mark.slow
+def test_model_with_a_linear_effect_keeps_the_line_and_saves_it(tmp_path):
+    """A 10 % error of the physics below 5 °C, linear in the inputs: the CV+ evidence
+    chooses the line, which survives save and load."""
+    import warnings
+
+    from hybridev import HybridModel, make_trips, simulate
+
+    t = simulate(make_trips(60, seed=1), seed=1)
+    rng = np.random.default_rng(0)
+    t["energy_kwh"] = (t["energy_kwh_physics"] * (1 - 0.004 * (t["temperature_c"] - 15))
+                       * rng.normal(1.0, 0.02, 60))
+    t = t[["trip_id", "distance_km", "avg_speed_kmh", "mode", "temperature_c",
+           "soc_initial", "hour", "energy_kwh"]].assign(date=np.repeat(np.arange(15), 4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(n_members=2, max_epochs=20).fit(t, groups="date", seed=0)
+    g = m.fit_info_["residual_gate"]
+    assert g["source"] == "cv+" and set(g["candidates"]) == {"networks", "linear"}
+    assert g["learner"] == "linear" and g["weight"] > 0.5
+    assert g["mape_gated"] < g["mape_physics"]
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    assert back.gate_.learner_ == "linear"
+    np.testing.assert_array_equal(back.predict(t.head(5))["energy_kwh_pred"],
+                                  m.predict(t.head(5))["energy_kwh_pred"])
