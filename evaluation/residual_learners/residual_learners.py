@@ -20,8 +20,12 @@ Methods, each trained on the training folds and scored on the held-out days:
   posterior median and discrepancy stage, no network);
 * ``hybrid_ungated``: the same fitted model with the gate's weight set to 1 (the
   residual networks' full correction, as before the gate);
+* ``linear_ungated``: the same fitted model with the gate's linear candidate
+  (``hybridev/learning/linear.py``: a ridge line on the out-of-fold physics residual)
+  at weight 1;
 * ``hybrid_gated``: ``HybridModel`` defaults (the stacking gate of
-  ``hybridev/learning/gate.py`` chooses the weight on the CV+ out-of-fold predictions);
+  ``hybridev/learning/gate.py`` chooses the learner, networks or line, and its weight
+  on the CV+ out-of-fold predictions);
 * ``hybrid_no_gate_fit`` (``--ablation``): a model fitted with the gate disabled, so
   that its CV+ intervals are calibrated on ungated predictions (for the coverage and
   width comparison);
@@ -67,7 +71,8 @@ N_FOLDS = 3
 LEVEL = 0.9
 SYNTH_CAR = "hatch_ptc"
 SYNTH_DAYS = 12
-METHODS = ("physics_part", "hybrid_ungated", "hybrid_gated", "hybrid_no_gate_fit",
+METHODS = ("physics_part", "hybrid_ungated", "linear_ungated", "hybrid_gated",
+           "hybrid_no_gate_fit",
            "nnls_stats", "linreg_summary", "median_kwh_per_km")
 
 
@@ -124,11 +129,16 @@ def cross_validate(m, extra, vehicle, *, ablation: bool) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             out = model.predict_interval(test, level=LEVEL, timeseries=m.traces)
-            w = model.gate_.weight_
-            model.gate_.weight_ = 1.0
+            gate = model.gate_
+            w, chosen = gate.weight_, gate.learner_
+            gate.weight_, gate.learner_ = 1.0, "networks"
             pred["hybrid_ungated"][te] = model.predict(test, timeseries=m.traces)[
                 "energy_kwh_pred"]
-            model.gate_.weight_ = w
+            if gate.linear_ is not None:  # the linear candidate, whole (diagnostic)
+                gate.learner_ = "linear"
+                pred["linear_ungated"][te] = model.predict(test, timeseries=m.traces)[
+                    "energy_kwh_pred"]
+            gate.weight_, gate.learner_ = w, chosen
         pred["physics_part"][te] = out["energy_kwh_physics"]
         pred["hybrid_gated"][te] = out["energy_kwh_pred"]
         gates.append(model.fit_info_["residual_gate"])
@@ -212,14 +222,28 @@ def write(out: Path, result: dict) -> None:
                 f"{x:.2f}" for x in v["by_fold"]) + " |")
         lines += ["", "Stacking gate per fold (out-of-fold evidence of the CV+ step on the "
                   "training days):", "",
-                  "| fold | weight | unshrunk | gain / se | OOF MAPE physics | ungated | gated |"
-                  " trips |", "|---|---|---|---|---|---|---|---|"]
+                  "| fold | learner | weight | unshrunk | gain / se | OOF MAPE physics | "
+                  "ungated | gated | trips |", "|---|---|---|---|---|---|---|---|---|"]
         for k, g in enumerate(r["gate"]):
-            lines.append(f"| {k} | {g['weight']:.2f} | {g.get('weight_unshrunk', 1):.2f} | "
+            lines.append(f"| {k} | {g.get('learner', 'networks')} | {g['weight']:.2f} | "
+                         f"{g.get('weight_unshrunk', 1):.2f} | "
                          f"{g.get('gain_t', float('nan')):.2f} | "
                          f"{g.get('mape_physics', float('nan')):.2f} | "
                          f"{g.get('mape_hybrid', float('nan')):.2f} | "
                          f"{g.get('mape_gated', float('nan')):.2f} | {g['n_trips']} |")
+        cands = [(k, g["candidates"]) for k, g in enumerate(r["gate"]) if "candidates" in g]
+        if cands:
+            lines += ["", "Out-of-fold MAPE (%) of each candidate on the training days "
+                      "(physics / ungated / gated, weight; the line's ridge penalty):", "",
+                      "| fold | networks | linear | alpha |", "|---|---|---|---|"]
+            for k, c in cands:
+                n, li = c["networks"], c["linear"]
+                lines.append(
+                    f"| {k} | {n['mape_physics']:.2f} / {n['mape_hybrid']:.2f} / "
+                    f"{n['mape_gated']:.2f}, w {n.get('weight', float('nan')):.2f} | "
+                    f"{li['mape_physics']:.2f} / {li['mape_hybrid']:.2f} / "
+                    f"{li['mape_gated']:.2f}, w {li.get('weight', float('nan')):.2f} | "
+                    f"{li.get('alpha', float('nan')):.3g} |")
         lines += ["", f"{LEVEL:.0%} intervals on the held-out days:", "",
                   "| model | coverage | mean width / E |", "|---|---|---|"]
         for m, v in r["intervals"].items():

@@ -172,7 +172,10 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
     record the Mondrian bins (cut at the fitting trips' median distance).
     """
     cal = Calibrator(mondrian=model.mondrian)
-    gate = ResidualGate() if model.learner_.residual else None  # hybridev.learning.gate
+    gate = None  # the stacking gate (hybridev.learning.gate); CV+: with the linear candidate
+    if model.learner_.residual:
+        gate = ResidualGate(xs if split.mode == "cv+" and not len(split.cal) else None,
+                            relative=model.learner_.relative)
     if len(split.cal):
         dist = raw_distributions(model, good.iloc[split.cal], traces, seed=int(seed))[0][0]
         dist = fit_gate(model, gate, good, split, e_meas, dist, split.cal, "split")

@@ -16,6 +16,15 @@ error of noise is dropped, a clear one is kept almost whole. Since ``L(w) <= L(0
 is convex in ``w``, the chosen ``w`` never does worse than the physics on the trips
 it was chosen on.
 
+**Two candidates.** Given the trips' standardised network inputs (``features=``, the
+CV+ path of :func:`hybridev.learning.fitting.fit_calibrator`), the gate also fits the
+simpler learner of :mod:`hybridev.learning.linear` (a ridge on the out-of-fold physics
+residual, its penalty chosen by grouped cross-validation) and weighs its own
+out-of-fold predictions by the same rule. The candidate (``"networks"`` or
+``"linear"``) with the smaller gated out-of-fold error is kept (the networks on a tie);
+``evidence_`` records both. With the linear learner chosen, every member's mean is
+replaced by ``w`` times the line's correction (the members then agree on the mean).
+
 **What the gate scales.** Each member's residual mean (so the members' disagreement
 shrinks with it); the members' noise heads are left as they are: they describe the
 scatter of the measured energy around the prediction, which does not vanish when the
@@ -30,6 +39,7 @@ import math
 
 import numpy as np
 
+from hybridev.learning.linear import LinearResidual
 from hybridev.learning.predictive import EnergyDistribution
 
 __all__ = ["GRID_STEP", "MIN_KWH_PER_KM", "ResidualGate"]
@@ -52,12 +62,30 @@ class ResidualGate:
         JSON-serialisable: ``source`` ("cv+", "split", "validation" or "none"),
         ``n_trips``, ``n_groups``, ``mape_physics``, ``mape_hybrid`` (ungated),
         ``mape_gated`` (%), ``weight_unshrunk`` and ``gain_t`` (gain over its
-        standard error).
+        standard error) of the chosen candidate; ``learner``; with the linear
+        candidate fitted, ``candidates``: the same figures per candidate and the
+        line's ``alpha``.
+    learner_ : {"networks", "linear"}
+        The residual the weight applies to.
+    linear_ : LinearResidual or None
+        The line, when it was fitted (saved only when it is the chosen learner).
+
+    Parameters
+    ----------
+    features : array_like, shape (n_trips, n_features), optional
+        Standardised network inputs of the trips :meth:`fit` will see, in the same
+        order: enables the linear candidate.
+    relative : bool
+        The residual scale is relative (as the learner's target).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, features=None, *, relative: bool = True) -> None:
+        self.features = None if features is None else np.asarray(features, dtype=float)
+        self.relative = bool(relative)
         self.weight_ = 1.0
         self.evidence_ = {"source": "none", "n_trips": 0}
+        self.learner_, self.linear_ = "networks", None
+        self._fit_rows = None
 
     def fit(self, energy_kwh, energy_physics_kwh, residual_kwh, distance_km, groups=None,
             *, source: str = "cv+") -> ResidualGate:
@@ -78,13 +106,44 @@ class ResidualGate:
         e = np.asarray(energy_kwh, float)
         p = np.asarray(energy_physics_kwh, float)
         r = np.asarray(residual_kwh, float)
-        s = np.maximum(np.abs(e), MIN_KWH_PER_KM * np.asarray(distance_km, float))
+        d = np.asarray(distance_km, float)
+        s = np.maximum(np.abs(e), MIN_KWH_PER_KM * d)
         ok = np.isfinite(e) & np.isfinite(p) & np.isfinite(r) & (s > 0)
-        e, p, r, s = e[ok], p[ok], r[ok], s[ok]
+        self.learner_, self.linear_, self._fit_rows = "networks", None, None
+        x = self.features
+        if x is not None and x.shape[0] != len(e):
+            raise ValueError(f"gate features have {x.shape[0]} rows for {len(e)} trips")
+        e, p, r, s, d = e[ok], p[ok], r[ok], s[ok], d[ok]
         g = np.arange(len(e)) if groups is None else np.asarray(groups)[ok]
         self.weight_, self.evidence_ = 1.0, {"source": source, "n_trips": len(e)}
         if len(e) < 2:
             return self
+        w, ev = self._choose(e, p, r, s, g)
+        if x is not None and len(np.unique(g)) >= 3:
+            scale = self._scale(p, d)
+            lin = LinearResidual().fit(x[ok], (e - p) / scale, g)
+            w_lin, ev_lin = self._choose(e, p, lin.oof_ * scale, s, g)
+            ev_lin["alpha"] = float(lin.alpha_)
+            ev["candidates"] = {"networks": {**ev, "weight": w},
+                                "linear": {**ev_lin, "weight": w_lin}}
+            self.linear_, self._fit_rows = lin, (x, np.asarray(distance_km, float))
+            if ev_lin["mape_gated"] < ev["mape_gated"] - 1e-9:
+                self.learner_ = "linear"
+                w, ev = w_lin, {**ev_lin, "candidates": ev["candidates"]}
+        self.weight_ = w
+        self.evidence_.update(learner=self.learner_, **ev)
+        return self
+
+    def _scale(self, energy_physics_kwh, distance_km) -> np.ndarray:
+        """The residual scale of the learner's target (1 when absolute), kWh."""
+        p = np.asarray(energy_physics_kwh, float)
+        if not self.relative:
+            return np.ones_like(p)
+        return np.maximum(np.abs(p), MIN_KWH_PER_KM * np.asarray(distance_km, float))
+
+    @staticmethod
+    def _choose(e, p, r, s, g) -> tuple[float, dict]:
+        """The rule of the module docstring: ``(weight, evidence)`` of one residual."""
         grid = np.linspace(0.0, 1.0, round(1 / GRID_STEP) + 1)
         err = np.abs((e - p)[None, :] - grid[:, None] * r[None, :]) / s  # (n_grid, n)
         loss = err.mean(axis=1)
@@ -98,13 +157,12 @@ class ResidualGate:
         se = float(per.std(ddof=1) / math.sqrt(len(per))) if len(per) > 1 else math.inf
         t = gain / se if se > 0 else (math.inf if gain > 0 else 0.0)
         factor = max(0.0, 1.0 - 1.0 / t**2) if t > 0 else 0.0
-        self.weight_ = float(np.clip(grid[best] * factor, 0.0, 1.0))
-        gated = float(np.mean(np.abs(e - p - self.weight_ * r) / s))
-        self.evidence_.update(
-            n_groups=len(np.unique(g)), weight_unshrunk=float(grid[best]),
-            gain_t=float(min(t, 1e6)), mape_physics=round(100 * float(loss[0]), 4),
-            mape_hybrid=round(100 * float(loss[-1]), 4), mape_gated=round(100 * gated, 4))
-        return self
+        w = float(np.clip(grid[best] * factor, 0.0, 1.0))
+        gated = float(np.mean(np.abs(e - p - w * r) / s))
+        return w, {"n_groups": len(np.unique(g)), "weight_unshrunk": float(grid[best]),
+                   "gain_t": float(min(t, 1e6)), "mape_physics": round(100 * float(loss[0]), 4),
+                   "mape_hybrid": round(100 * float(loss[-1]), 4),
+                   "mape_gated": round(100 * gated, 4)}
 
     def fit_distributions(self, energy_kwh, dists: list[EnergyDistribution], distance_km,
                           groups=None, *, source: str) -> ResidualGate:
@@ -118,13 +176,29 @@ class ResidualGate:
         r = np.concatenate([d.residual_mean_kwh.mean(axis=0) for d in dists])
         return self.fit(energy_kwh, p, r, distance_km, groups, source=source)
 
-    def apply(self, member_means: np.ndarray) -> np.ndarray:
-        """The members' residual means scaled by ``weight_`` (any shape, kWh)."""
+    def apply(self, member_means: np.ndarray, x=None, scale=None) -> np.ndarray:
+        """The members' residual means (..., n_trips), kWh, with the gate applied.
+
+        Networks: scaled by ``weight_``. Linear: every member's mean replaced by
+        ``weight_`` times the line's correction of the standardised inputs ``x``
+        (n_trips, n_features) times the target ``scale`` (n_trips,), kWh.
+        """
+        if self.learner_ == "linear":
+            if x is None or scale is None:
+                raise ValueError("the linear residual needs the trips' inputs and scale")
+            corr = self.weight_ * self.linear_.predict(x) * np.asarray(scale, float)
+            return np.broadcast_to(corr, np.shape(member_means)).astype(float)
         return member_means if self.weight_ == 1.0 else member_means * self.weight_
 
     def gated(self, dist: EnergyDistribution) -> EnergyDistribution:
-        """An ungated raw distribution with the gate applied to its members' means."""
-        return EnergyDistribution(dist.physics_draws_kwh, self.apply(dist.residual_mean_kwh),
+        """An ungated raw distribution of the trips :meth:`fit` saw, with the gate applied
+        to its members' means (the line's scale from the distribution's own physics)."""
+        x = scale = None
+        if self.learner_ == "linear":
+            x, d = self._fit_rows
+            scale = self._scale(dist.physics_draws_kwh.mean(axis=0), d)
+        return EnergyDistribution(dist.physics_draws_kwh,
+                                  self.apply(dist.residual_mean_kwh, x, scale),
                                   dist.residual_std_kwh, spread_factor=dist.spread_factor)
 
     def summary(self) -> dict:
@@ -133,8 +207,14 @@ class ResidualGate:
 
     # -- persistence ---------------------------------------------------------------------
     def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:
-        """``(json_doc, arrays)``: the weight and its evidence (no arrays)."""
-        return {"weight": float(self.weight_), "evidence": dict(self.evidence_)}, {}
+        """``(json_doc, arrays)``: the weight and its evidence; with the linear learner
+        chosen, also ``learner``, ``linear`` (its document) and ``linear.coef``."""
+        doc = {"weight": float(self.weight_), "evidence": dict(self.evidence_)}
+        if self.learner_ != "linear":
+            return doc, {}
+        ldoc, larr = self.linear_.to_arrays()
+        return ({**doc, "learner": "linear", "linear": ldoc},
+                {f"linear.{k}": v for k, v in larr.items()})
 
     def set_arrays(self, doc: dict, arrays: dict[str, np.ndarray] | None = None
                    ) -> ResidualGate:
@@ -145,4 +225,13 @@ class ResidualGate:
             raise ValueError(f"gate weight={w!r} must be in [0, 1]")
         self.weight_ = w
         self.evidence_ = dict(doc.get("evidence", {"source": "none", "n_trips": 0}))
+        self.learner_, self.linear_, self._fit_rows = "networks", None, None
+        learner = doc.get("learner", "networks")  # models saved before it: the networks
+        if learner == "linear":
+            self.linear_ = LinearResidual().set_arrays(doc["linear"], {
+                k[len("linear."):]: v for k, v in (arrays or {}).items()
+                if k.startswith("linear.")})
+            self.learner_ = "linear"
+        elif learner != "networks":
+            raise ValueError(f"gate learner={learner!r} must be 'networks' or 'linear'")
         return self

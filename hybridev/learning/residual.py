@@ -8,8 +8,9 @@ held inside their training range (:meth:`hybridev.learning.domain.TrainingDomain
 The learner itself is a deep ensemble (:func:`hybridev.learning.nn.train_ensemble`);
 the stacking gate (:class:`hybridev.learning.gate.ResidualGate`, ``gate_``) scales the
 members' means in :meth:`ResidualLearner.moments`, so every prediction (point, CV+ fold,
-interval) uses the gated correction; a simpler regressor would be another class with
-:meth:`ResidualLearner.moments`.
+interval) uses the gated correction; when the gate chose the simpler learner
+(:mod:`hybridev.learning.linear`, a ridge line on the same standardised inputs), the
+members' means are replaced by its gated correction there.
 
 **Training-distance hold** (:func:`hold_inputs`). The networks take distance (and
 the physics energy, which scales with it) as inputs; outside the distances of the
@@ -222,7 +223,7 @@ class ResidualLearner:
                 + self.target_mean_) * scale
         gate = getattr(self, "gate_", None)  # the stacking gate (hybridev.learning.gate)
         if gate is not None and self.residual:
-            mean = gate.apply(mean)
+            mean = gate.apply(mean, x, np.broadcast_to(scale, (x.shape[0],)))
         if variances[0] is None:
             return mean, None
         return mean, np.concatenate(variances, axis=1).astype(float) * (self.target_std_ * scale)**2

@@ -463,6 +463,10 @@ def test_report_shows_the_gate_evidence(run):
     g = run["summary"]["hybrid"]["fit_info"]["residual_gate"]
     assert 0.0 <= g["weight"] <= 1.0
     page = (run["out"] / "report.html").read_text()
-    assert f"keeps {100 * g['weight']:.0f} % of the networks' correction" in page
+    what = "the linear residual's" if g.get("learner") == "linear" else "the networks'"
+    assert f"keeps {100 * g['weight']:.0f} % of {what} correction" in page
     assert f"{g['mape_physics']:.2f} % for the physics part" in page
     assert gate_note({"hybrid": {"fit_info": {}}}) == ""
+    lin = {**g, "learner": "linear", "weight": 0.5}
+    assert "keeps 50 % of the linear residual's correction" in gate_note(
+        {"hybrid": {"fit_info": {"residual_gate": lin}}})

@@ -72,8 +72,10 @@ def gate_note(s: dict) -> str:
     where = {"cv+": "the CV+ folds' predictions of their held-out days",
              "split": "the held-out calibration trips",
              "validation": "the early-stopping trips"}.get(g["source"], g["source"])
-    return (f"<p class='note'>Stacking gate: the hybrid keeps {100 * g['weight']:.0f} % of the "
-            f"networks' correction, chosen on {where} ({g['n_trips']} trips): out-of-fold MAPE "
+    what = ("the linear residual's" if g.get("learner") == "linear"  # learning/linear.py
+            else "the networks'")
+    return (f"<p class='note'>Stacking gate: the hybrid keeps {100 * g['weight']:.0f} % of "
+            f"{what} correction, chosen on {where} ({g['n_trips']} trips): out-of-fold MAPE "
             f"{g['mape_physics']:.2f} % for the physics part, {g['mape_hybrid']:.2f} % with the "
             f"whole correction, {g['mape_gated']:.2f} % as kept (a correction that does not "
             "beat the physics out of fold by more than its noise is dropped).</p>")
