@@ -38,7 +38,17 @@ between two logged ones) is in the domain: it keeps the model's own calibrated
 spread, times the learned rate's interpolation inflation (1 within a tolerance
 of the data; :class:`~hybridev.learning.shift.GapRate`, :meth:`OutOfDomainSpread.rate_inflation`).
 
-Intervals of such trips are ``mu +- z_level * sd_ood``, never narrower than
+**With a learned rate** (``rate.learned_``: enough of the fit's own scored trips lay
+beyond their fold's conditions), a trip beyond the intensive conditions gets the
+interval the rate was learned for, its conformal ``mu +- q s inflation(g)``, and no
+floor at ``sd_ood``: the rate measured how much wider the conformal interval must be
+there, and the trip's own ``s`` already holds its posterior draws' spread (the prior of
+a heater never seen working). Stacking the raw spread on it made the flagged M1 trips
+at 40 training trips 1.75x as wide as the in-domain ones at similar errors
+(``evaluation/planned_trips``). The floor below stays for a missing mode or trace,
+and with a fixed rate.
+
+Otherwise intervals of such trips are ``mu +- z_level * sd_ood``, never narrower than
 the final model's own conformally calibrated interval ``mu +- q sd``. With
 CV+ the CV+ interval is not used for them: its guarantee rests on the new trip
 being exchangeable with the training trips, which an out-of-domain trip is

@@ -69,3 +69,39 @@ def test_fold_gaps_give_the_interpolation_gap_of_each_folds_domain():
     assert g[4:].tolist() == [0.0, 0.0]  # 10 degC lies between 0 and 20 degC
     np.testing.assert_allclose(h[4:], [10 / 3, 10 / 3])
     np.testing.assert_array_equal(fold_gaps(t, np.array([0, 0, 1, 1, 2, 2])), g)
+
+
+def _ood_inputs():
+    """A trip in the domain (19 degC) and one beyond it (40 degC) of a model trained at
+    0 and 20 degC, whose raw spread (posterior draws) is far wider than its calibrated
+    interval."""
+    from hybridev.learning.steps import CalibratedInterval, RawPrediction
+
+    dom = TrainingDomain.fit(_trips([0.0, 20.0]), np.zeros((2, 1)))
+    a = dom.assess(_trips([19.0, 40.0]))
+    mu, s, q = np.array([5.0, 5.0]), np.array([0.2, 0.2]), 1.5
+    raw = RawPrediction(table=pd.DataFrame({"energy_kwh_physics": mu}), dist=None,
+                        mean=mu, std=s, var_draws=np.full(2, 1.0), excess_var=np.zeros(2))
+    cal = CalibratedInterval(mean=mu, std=s, lo=mu - q * s, hi=mu + q * s,
+                             lo_one=mu - q * s, quantile=q, quantile_one=q)
+    return a, raw, cal, q
+
+
+def test_a_learned_rate_widens_the_conformal_interval_without_the_raw_floor():
+    a, raw, cal, q = _ood_inputs()
+    assert a.in_domain.tolist() == [True, False]
+    rng = np.random.default_rng(0)
+    learned = GapRate().fit(rng.standard_normal(40), np.r_[np.zeros(20), np.full(20, 2.0)])
+    assert learned.learned_
+    wide, conf = OutOfDomainSpread(rate=learned).widen(a, raw, cal, 0.9)
+    infl = float(learned.inflation(a.gap)[1])
+    assert infl > 1.0
+    np.testing.assert_allclose([wide.lo[1], wide.hi[1]], [5.0 - q * 0.2 * infl,
+                                                          5.0 + q * 0.2 * infl])
+    np.testing.assert_allclose([wide.lo[0], wide.hi[0]], [cal.lo[0], cal.hi[0]])
+    np.testing.assert_allclose(conf, [0.2, 0.2 * infl])
+    # with a fixed rate (too few shifted trips) the raw spread (sd 1 kWh) is the floor
+    fixed = GapRate().fit(np.zeros(5), np.r_[np.zeros(3), np.full(2, 2.0)])
+    assert not fixed.learned_
+    wide_fixed = OutOfDomainSpread(rate=fixed).widen(a, raw, cal, 0.9)[0]
+    assert wide_fixed.hi[1] - wide_fixed.lo[1] > 2 * 1.6 * 1.0
