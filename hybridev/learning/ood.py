@@ -44,7 +44,7 @@ interval the rate was learned for, its conformal ``mu +- q s inflation(g)``, and
 floor at ``sd_ood``: the rate measured how much wider the conformal interval must be
 there, and the trip's own ``s`` already holds its posterior draws' spread (the prior of
 a heater never seen working). Stacking the raw spread on it made the flagged M1 trips
-at 40 training trips 1.75x as wide as the in-domain ones at similar errors
+at 40 training trips far wider than the in-domain ones at similar errors
 (``evaluation/planned_trips``). The floor below stays for a missing mode or trace,
 and with a fixed rate.
 
