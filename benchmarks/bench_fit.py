@@ -9,7 +9,7 @@ n = 20 ... 400 trips (:data:`SIZES`, with 248, 249, 250, 251 around the switch a
 the pairs n, n + 1 where the number of fitted CV+ folds changes), each fitted with the
 default ``HybridModel(seed=0)`` (CV+ conformal with five fold posteriors and fold
 ensembles up to 150 trips, ``J`` of them from there, falling to one just below 250
-(:func:`hybridev.learning.params.cv_plus_members`), from 250 split conformal), pinned to one core with one
+(:func:`hybridev.learning.params.cv_plus_folds`), from 250 split conformal), pinned to one core with one
 BLAS/OpenMP/torch thread. Per n: median wall and CPU time of ``repeats`` fits,
 the conformal mode, the ratio of each step's time to the previous one's, the
 1-minute load average before the fit, and where the CPU time went (of the

@@ -4,8 +4,8 @@ Run from the repository root::
 
     python evaluation/cv_ramp/cv_ramp_coverage.py [--seeds 3]
 
-For n = 150, 220, 249 (CV+ with ``J`` of the five fold models,
-:func:`hybridev.learning.params.cv_plus_members`) and 260 (split conformal), and for
+For n = 150, 220, 249 (CV+ with ``J`` of the five fold models, fewer the closer to
+250, :func:`hybridev.learning.params.cv_plus_folds`) and 260 (split conformal), and for
 ``seeds`` fit seeds each: fit ``HybridModel().fit(..., seed=s)`` on
 ``make_dataset(n, truth="structured", seed=s)`` and predict 90 % intervals of 400 new
 trips ``make_dataset(400, truth="structured", seed=1000 + s)``. Beside each ramp

@@ -52,7 +52,6 @@ crepes' split conformal regressor where the two coincide.
 
 from __future__ import annotations
 
-import copy
 import math
 import warnings
 
@@ -84,19 +83,16 @@ poorly determined whatever the number of trips)."""
 def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.ndarray,
                 xs: np.ndarray, ys: np.ndarray, e_meas: np.ndarray, seed: int,
                 ss: np.random.SeedSequence, *, cv_folds: int, val_fraction: float,
-                gate=None, members=None) -> tuple[list, list, CVPlusConformal]:
+                gate=None, n_fitted: int | None = None) -> tuple[list, list, CVPlusConformal]:
     """Train the fold ensembles: ``(fold_nets, fold_physics, conformal)``.
 
-    Only the first ``J = len(members)`` of the ``K`` folds (default all) get a fold
-    model, fold ``f`` an ensemble of ``members[f]`` members; the scores are those of
-    their held-out trips (``fold < J``, in trip order; :func:`cv_fold_assignment` gives
-    the folds), the other trips only train. Every fold model still trains on all trips
-    but its own fold's, so ``J = K`` full folds is CV+ and fewer a cheaper
-    cross-conformal step with about ``J n / K`` scores
-    (:func:`hybridev.learning.params.cv_plus_members` ramps them down before the switch to
-    split conformal so that fit time has no cliff). A fold ensemble of fewer members has
-    a smaller spread between members, so its scores are larger: its intervals are, if
-    anything, wider.
+    Only the first ``n_fitted`` of the ``K`` folds (``J``, default all) get a fold
+    model; the scores are those of their held-out trips (``fold < J``, in trip order;
+    :func:`cv_fold_assignment` gives the folds), the other trips only train. Every
+    fold model still trains on all trips but its own fold's, so ``J = K`` is CV+ and
+    ``J < K`` a cheaper cross-conformal step with ``about J n / K`` scores
+    (:func:`hybridev.learning.params.cv_plus_folds` ramps ``J`` down before the switch to
+    split conformal so that fit time has no cliff).
 
     Parameters
     ----------
@@ -128,16 +124,13 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
         Fitted here on the folds' predictions of their held-out trips
         (:mod:`hybridev.learning.gate`); the scores are then those of the gated
         predictions, as the fold ensembles give them at prediction time.
-    members : sequence of int, optional
-        Members of each fitted fold's ensemble, ``J <= K`` entries (default ``K`` folds of
-        ``learner``'s ``n_members``).
+    n_fitted : int, optional
+        ``J``, the folds that get a fold model, in ``1..K`` (default ``K``).
     """
     fold, rng, torch_ss = _assignment(codes, cv_folds, ss)
     k = int(fold.max()) + 1
     seeds = torch_ss.generate_state(k)
-    m_all = int(learner.net["n_members"])
-    members = [m_all] * k if members is None else [int(m) for m in members][:k]
-    n_fit = len(members)
+    n_fit = k if n_fitted is None else min(max(int(n_fitted), 1), k)
     post = physics.posterior_
     if post is not None:
         valid = validate_prediction_trips(good)
@@ -155,9 +148,8 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
             table, _ = physics.posterior_table(valid, 0, 0, physics=phys, stats=stats,
                                                fade=None)  # training trips: in the domain
             xs_f, ys_f = _training_arrays(learner, table, e_meas)
-        lrn = learner if members[f] == m_all else _with_members(learner, members[f])
-        net, _ = lrn.train(xs_f, ys_f, tr, rest[val] if (~val).any() else rest[:0],
-                           int(seeds[f]))
+        net, _ = learner.train(xs_f, ys_f, tr, rest[val] if (~val).any() else rest[:0],
+                               int(seeds[f]))
         nets.append(net)
         fold_physics.append(phys)
     rows = np.flatnonzero(fold < n_fit)  # the scored trips: held out of a fitted fold
@@ -173,13 +165,6 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
     return (nets, fold_physics if post is not None else [],
             CVPlusConformal((e_r - mu[f_r, idx]) / sd[f_r, idx], f_r))
-
-
-def _with_members(learner, n_members: int):
-    """A shallow copy of ``learner`` whose new ensembles have ``n_members`` members."""
-    out = copy.copy(learner)
-    out.net = {**learner.net, "n_members": int(n_members)}
-    return out
 
 
 def _assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSequence):
@@ -305,14 +290,10 @@ def nets_to_arrays(nets) -> dict[str, np.ndarray]:
 
 
 def nets_from_arrays(learner, arrays: dict[str, np.ndarray], n_folds: int) -> list:
-    """Rebuild ``n_folds`` fold ensembles of ``learner``'s architecture, each with the
-    members its arrays hold (ValueError on a bad array)."""
+    """Rebuild ``n_folds`` fold ensembles of ``learner``'s architecture (ValueError on a bad array)."""
     nets = []
     for k in range(n_folds):
-        w0 = arrays.get(f"cv{k}.w0")  # a fold may have fewer members (ramp before split)
-        m = int(np.shape(w0)[0]) if w0 is not None and np.ndim(w0) == 3 else None
-        net = (learner if m in (None, learner.net["n_members"]) else
-               _with_members(learner, m)).new_net()
+        net = learner.new_net()
         net.load_arrays({n[len(f"cv{k}."):]: a for n, a in arrays.items()
                          if n.startswith(f"cv{k}.")}, what=f"CV+ fold network {k}")
         net.eval()

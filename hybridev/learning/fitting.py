@@ -36,7 +36,7 @@ from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.features import trip_features
 from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
-from hybridev.learning.params import conformal_mode, cv_plus_members
+from hybridev.learning.params import conformal_mode, cv_plus_folds
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of
 from hybridev.learning.shift import GapRate, fold_gaps
@@ -174,7 +174,7 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
 
     Split conformal scores the held-out trips with the model's raw distribution; CV+
     trains the fold ensembles (:func:`hybridev.learning.cvplus.fit_cv_plus`; ``J`` of
-    ``cv_folds`` of them, :func:`hybridev.learning.params.cv_plus_members`). Both
+    ``cv_folds`` of them, :func:`hybridev.learning.params.cv_plus_folds`). Both
     record the Mondrian bins (cut at the fitting trips' median distance).
     """
     cal = Calibrator(mondrian=model.mondrian)
@@ -189,7 +189,7 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
                 model, t, tr, seed=s, nets=nets, physics=ph)[0],
             good, traces, split.codes, xs, ys, e_meas, seed, split.cv_ss,
             cv_folds=int(model.cv_folds), val_fraction=model.val_fraction, gate=gate,
-            members=cv_plus_members(model, len(good))))
+            n_fitted=cv_plus_folds(model, len(good))))
     elif len(split.val) and gate is not None:  # no calibration trips: the validation ones
         dist = raw_distributions(model, good.iloc[split.val], traces, seed=int(seed))[0][0]
         fit_gate(model, gate, good, split, e_meas, dist, split.val, "validation")
@@ -287,8 +287,6 @@ def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
         info["heater"] = heater.to_dict()
     if getattr(model, "gate_", None) is not None:
         info["residual_gate"] = model.gate_.summary()
-    if model.calibrator_.fold_nets_:  # fewer near the switch to split conformal
-        info["cv_fold_members"] = [int(n.n_members) for n in model.calibrator_.fold_nets_]
     if model.calibrator_.fold_physics_:  # CV+ fold posteriors: warm start, steps, mixing
         info["cv_fold_posteriors"] = fold_diagnostics(model.calibrator_.fold_physics_)
     if "parked_min" in good.columns:  # parking time (from start_time): what the fit saw

@@ -22,9 +22,8 @@ from hybridev.learning.inputs import _check_range
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS
 
-__all__ = ["CONFORMAL_MODES", "CV_PLUS_MAX_TRIPS", "CV_PLUS_RAMP_TRIPS", "PAPER_CONFIG",
-           "PARAMETERS_DOC", "VAL_FRACTION", "HybridParams", "check_params", "conformal_mode",
-           "cv_plus_members", "feature_names"]
+__all__ = ["CONFORMAL_MODES", "CV_PLUS_MAX_TRIPS", "CV_PLUS_RAMP_TRIPS", "PAPER_CONFIG", "PARAMETERS_DOC",
+           "VAL_FRACTION", "HybridParams", "check_params", "conformal_mode", "feature_names"]
 
 PAPER_CONFIG = MappingProxyType({
     "n_members": 1, "heteroscedastic": False, "calibrate_physics": False,
@@ -46,10 +45,10 @@ conformal (a 15 % split then holds >= 37 calibration trips; CV+ costs ``cv_folds
 extra ensemble trainings and ``cv_folds`` extra network passes per prediction)."""
 
 CV_PLUS_RAMP_TRIPS = 150
-"""From this many trips up to :data:`CV_PLUS_MAX_TRIPS`, ``conformal="auto"`` fits fewer
-CV+ fold ensemble members the closer the switch, down to one fold of one member
-(:func:`cv_plus_members`): each added trip changes the fit's cost by at most one
-member's training, so fit time has no cliff at the switch to split conformal (issue 34)."""
+"""From this many trips up to :data:`CV_PLUS_MAX_TRIPS`, ``conformal="auto"`` fits only
+``J`` of the ``cv_folds`` fold models, ``J`` falling linearly to 1 (:func:`cv_plus_folds`):
+each added trip changes the fit's cost by at most one fold's training, so fit time has
+no cliff at the switch to split conformal (issue 34)."""
 
 
 def feature_names(model) -> tuple[str, ...]:
@@ -67,23 +66,20 @@ def conformal_mode(model, n_trips: int) -> str:
     return model.conformal
 
 
-def cv_plus_members(model, n_trips: int) -> tuple[int, ...]:
-    """Ensemble members of each CV+ fold model fitted on ``n_trips`` trips (length ``J``).
+def cv_plus_folds(model, n_trips: int) -> int:
+    """``J``, the CV+ folds that get a fold model in a fit on ``n_trips`` trips.
 
-    ``conformal="auto"``: ``B = clip(ceil(K M (N_hi - n) / (N_hi - N_lo)), 1, K M)``
-    member trainings in all (``K = cv_folds``, ``M = n_members``, ``N_lo =``
-    :data:`CV_PLUS_RAMP_TRIPS`, ``N_hi =`` :data:`CV_PLUS_MAX_TRIPS`), ``M`` a fold
-    and the rest in the last fitted fold: all ``K`` full folds up to ``N_lo`` trips, one
-    fold of one member just below ``N_hi``, and at most one member more or less from
-    one trip to the next. An explicit ``conformal="cv+"`` always fits ``K`` full folds
+    ``conformal="auto"``: ``clip(ceil(K (N_hi - n) / (N_hi - N_lo)), 1, K)`` with ``K =
+    cv_folds``, ``N_lo =`` :data:`CV_PLUS_RAMP_TRIPS`, ``N_hi =`` :data:`CV_PLUS_MAX_TRIPS`:
+    all ``K`` folds up to ``N_lo`` trips, one just below ``N_hi``. An explicit
+    ``conformal="cv+"`` always fits all ``K``
     (:func:`hybridev.learning.cvplus.fit_cv_plus`).
     """
-    k, m = int(model.cv_folds), int(model.n_members)
+    k = int(model.cv_folds)
     if model.conformal != "auto":
-        return (m,) * k
+        return k
     span = CV_PLUS_MAX_TRIPS - CV_PLUS_RAMP_TRIPS
-    b = min(max(math.ceil(k * m * (CV_PLUS_MAX_TRIPS - int(n_trips)) / span), 1), k * m)
-    return (m,) * (b // m) + ((b % m,) if b % m else ())
+    return min(max(math.ceil(k * (CV_PLUS_MAX_TRIPS - int(n_trips)) / span), 1), k)
 
 
 def _check_flag(name: str, value) -> None:
@@ -197,7 +193,7 @@ PARAMETERS_DOC = """
         needs ``n_cal >= 9`` held-out trips for 90 %). ``"auto"`` (default):
         CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal from there on;
         from :data:`CV_PLUS_RAMP_TRIPS` trips on, fewer fold models the closer to the
-        switch (:func:`cv_plus_members`).
+        switch (:func:`cv_plus_folds`).
     cv_folds : int
         Folds of the CV+ step (default 5; fewer when there are fewer groups).
     mondrian : bool

@@ -148,31 +148,25 @@ def test_fit_groups_by_date_by_default(data):
     assert HybridModel(**FAST).fit(d, seed=0, groups=None).fit_info_["n_groups"] == 40
 
 
-def test_ramp_schedule_steps_by_one_member():
-    from hybridev.learning.params import (
-        CV_PLUS_MAX_TRIPS,
-        CV_PLUS_RAMP_TRIPS,
-        cv_plus_members,
-    )
-    m = HybridModel()  # 5 folds of 5 members
-    budget = [sum(cv_plus_members(m, n)) for n in range(2, CV_PLUS_MAX_TRIPS)]
-    assert cv_plus_members(m, 40) == cv_plus_members(m, CV_PLUS_RAMP_TRIPS) == (5,) * 5
-    assert cv_plus_members(m, CV_PLUS_MAX_TRIPS - 1) == (1,)
-    assert cv_plus_members(m, 229) == (5, 1)  # full folds first, the rest in the last one
-    assert all(a - b in (0, 1) for a, b in itertools.pairwise(budget))  # one member a step
-    assert cv_plus_members(HybridModel(conformal="cv+"), CV_PLUS_MAX_TRIPS - 1) == (5,) * 5
-    assert cv_plus_members(HybridModel(cv_folds=10, n_members=2), 200) == (2,) * 5
+def test_fold_ramp_schedule_steps_by_one_fold():
+    from hybridev.learning.params import CV_PLUS_MAX_TRIPS, CV_PLUS_RAMP_TRIPS, cv_plus_folds
+    m = HybridModel()
+    js = [cv_plus_folds(m, n) for n in range(2, CV_PLUS_MAX_TRIPS)]
+    assert js[0] == 5 and cv_plus_folds(m, CV_PLUS_RAMP_TRIPS) == 5
+    assert cv_plus_folds(m, CV_PLUS_MAX_TRIPS - 1) == 1
+    assert all(a - b in (0, 1) for a, b in itertools.pairwise(js))  # one fold a step
+    assert cv_plus_folds(HybridModel(conformal="cv+"), CV_PLUS_MAX_TRIPS - 1) == 5
+    assert cv_plus_folds(HybridModel(cv_folds=10), CV_PLUS_MAX_TRIPS - 1) == 1
 
 
 def test_partial_folds_score_only_their_trips_and_survive_save_load(data, tmp_path):
-    # 229 trips: 2 of the 5 fold models (5 and 1 members); their held-out trips are the
-    # scores
+    # 229 trips: 2 of the 5 fold models; their held-out trips are the scores
     from hybridev.learning.cvplus import cv_fold_assignment
     d = data.head(229)
     m = HybridModel(**(FAST | {"max_epochs": 2})).fit(d, seed=0, groups="day")
     cp = m.conformal_
     assert m.fit_info_["conformal"] == "cv+" and m.fit_info_["cv_folds"] == cp.n_folds == 2
-    assert len(m.cv_nets_) == 2 and m.fit_info_["cv_fold_members"] == [5, 1]
+    assert len(m.cv_nets_) == 2
     codes = np.unique(d["day"].to_numpy(), return_inverse=True)[1]
     fold = cv_fold_assignment(codes, 5, np.random.SeedSequence(0).spawn(3)[2])
     assert np.array_equal(cp.fold, fold[fold < 2])  # the fitted folds' trips, in order
