@@ -259,7 +259,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                                                      interior=True))
         planned = PlannedTripCalibrator().fit(
             e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
-            conditions=conditions_of(good.iloc[idx]), fold=fold[idx] if cv else None)
+            conditions=conditions_of(good.iloc[idx]),
+            fold=fold[idx] if len(cv) > 1 else None)  # one fold: blocks, as split
         domain = dataclasses.replace(domain, needs_trace=False)
         scores.append(planned.residuals_)
         gaps.append(g_plan)
