@@ -66,8 +66,8 @@ from hybridev.learning.features import trip_features
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
-__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "fit_cv_plus",
-           "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
+__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
+           "fit_cv_plus", "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
@@ -83,8 +83,16 @@ poorly determined whatever the number of trips)."""
 def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.ndarray,
                 xs: np.ndarray, ys: np.ndarray, e_meas: np.ndarray, seed: int,
                 ss: np.random.SeedSequence, *, cv_folds: int, val_fraction: float,
-                gate=None) -> tuple[list, list, CVPlusConformal]:
+                gate=None, n_fitted: int | None = None) -> tuple[list, list, CVPlusConformal]:
     """Train the fold ensembles: ``(fold_nets, fold_physics, conformal)``.
+
+    Only the first ``n_fitted`` of the ``K`` folds (``J``, default all) get a fold
+    model; the scores are those of their held-out trips (``fold < J``, in trip order;
+    :func:`cv_fold_assignment` gives the folds), the other trips only train. Every
+    fold model still trains on all trips but its own fold's, so ``J = K`` is CV+ and
+    ``J < K`` a cheaper cross-conformal step with ``about J n / K`` scores
+    (:func:`hybridev.learning.params.cv_plus_folds` ramps ``J`` down before the switch to
+    split conformal so that fit time has no cliff).
 
     Parameters
     ----------
@@ -109,24 +117,26 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
     ss : numpy.random.SeedSequence
         Seeds the folds, the early-stopping shares and the fold trainings.
     cv_folds : int
+        ``K``.
     val_fraction : float
         Early-stopping share of each fold's training trips.
     gate : ResidualGate, optional
         Fitted here on the folds' predictions of their held-out trips
         (:mod:`hybridev.learning.gate`); the scores are then those of the gated
         predictions, as the fold ensembles give them at prediction time.
+    n_fitted : int, optional
+        ``J``, the folds that get a fold model, in ``1..K`` (default ``K``).
     """
-    split_ss, torch_ss = ss.spawn(2)
-    rng = np.random.default_rng(split_ss)
-    fold = group_kfold(codes, int(cv_folds), rng)
+    fold, rng, torch_ss = _assignment(codes, cv_folds, ss)
     k = int(fold.max()) + 1
     seeds = torch_ss.generate_state(k)
+    n_fit = k if n_fitted is None else min(max(int(n_fitted), 1), k)
     post = physics.posterior_
     if post is not None:
         valid = validate_prediction_trips(good)
         stats = physics.stats(valid, traces)
     nets, fold_physics = [], []
-    for f in range(k):  # cv_folds trainings (5 by default)
+    for f in range(n_fit):  # J trainings (cv_folds = 5 by default)
         rest = np.flatnonzero(fold != f)
         val = np.zeros(len(rest), dtype=bool)
         if val_fraction > 0:
@@ -142,18 +152,41 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
                                int(seeds[f]))
         nets.append(net)
         fold_physics.append(phys)
-    dists = raw_distributions(good, traces, int(seed), nets, fold_physics)
-    idx = np.arange(len(e_meas))
+    rows = np.flatnonzero(fold < n_fit)  # the scored trips: held out of a fitted fold
+    dists = raw_distributions(good.iloc[rows], traces, int(seed), nets, fold_physics)
+    f_r, idx, e_r = fold[rows], np.arange(len(rows)), e_meas[rows]
     if gate is not None:  # the stacking gate on the out-of-fold predictions
-        p_oof = np.stack([d.physics_draws_kwh.mean(axis=0) for d in dists])[fold, idx]
-        r_oof = np.stack([d.residual_mean_kwh.mean(axis=0) for d in dists])[fold, idx]
-        gate.fit(e_meas, p_oof, r_oof, good["distance_km"].to_numpy(float), codes,
+        p_oof = np.stack([d.physics_draws_kwh.mean(axis=0) for d in dists])[f_r, idx]
+        r_oof = np.stack([d.residual_mean_kwh.mean(axis=0) for d in dists])[f_r, idx]
+        if gate.features is not None and len(gate.features) == len(fold):
+            gate.features = gate.features[rows]  # the linear candidate: the scored trips'
+        gate.fit(e_r, p_oof, r_oof, good["distance_km"].to_numpy(float)[rows], codes[rows],
                  source="cv+")
         dists = [gate.gated(d) for d in dists]
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
     return (nets, fold_physics if post is not None else [],
-            CVPlusConformal((e_meas - mu[fold, idx]) / sd[fold, idx], fold))
+            CVPlusConformal((e_r - mu[f_r, idx]) / sd[f_r, idx], f_r))
+
+
+def _assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSequence):
+    """``(fold, rng, torch_ss)``: the folds of :func:`fit_cv_plus`, the generator of its
+    early-stopping shares (after the folds) and the seeds of its trainings. Derived
+    from ``ss``'s first two children without spawning them (``ss`` is not changed), so
+    :func:`cv_fold_assignment` gives the same folds later."""
+    split_ss, torch_ss = (np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, i),
+                                                 pool_size=ss.pool_size) for i in range(2))
+    rng = np.random.default_rng(split_ss)
+    return group_kfold(codes, int(cv_folds), rng), rng, torch_ss
+
+
+def cv_fold_assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSequence
+                       ) -> np.ndarray:
+    """Fold (0..K-1) of every trip in :func:`fit_cv_plus` with the same arguments, (n,).
+
+    The trips scored by a fit with ``J`` fold models are ``fold < J``, in trip order.
+    """
+    return _assignment(codes, cv_folds, ss)[0]
 
 
 def _fold_physics(physics, trips, seed: int, traces):

@@ -26,12 +26,17 @@ from hybridev.data.parked import with_parked_minutes
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.calibrate import Calibrator
 from hybridev.learning.components import new_learner, new_physics
-from hybridev.learning.cvplus import fit_cv_plus, fold_diagnostics, warn_calibration
+from hybridev.learning.cvplus import (
+    cv_fold_assignment,
+    fit_cv_plus,
+    fold_diagnostics,
+    warn_calibration,
+)
 from hybridev.learning.domain import TrainingDomain
 from hybridev.learning.features import trip_features
 from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
-from hybridev.learning.params import conformal_mode
+from hybridev.learning.params import conformal_mode, cv_plus_folds
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GapRate, fold_gaps
@@ -168,7 +173,8 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
     """The calibrator of a model whose physics, learner and domain are fitted.
 
     Split conformal scores the held-out trips with the model's raw distribution; CV+
-    trains the fold ensembles (:func:`hybridev.learning.cvplus.fit_cv_plus`). Both
+    trains the fold ensembles (:func:`hybridev.learning.cvplus.fit_cv_plus`; ``J`` of
+    ``cv_folds`` of them, :func:`hybridev.learning.params.cv_plus_folds`). Both
     record the Mondrian bins (cut at the fitting trips' median distance).
     """
     cal = Calibrator(mondrian=model.mondrian)
@@ -185,7 +191,8 @@ def fit_calibrator(model, good: pd.DataFrame, traces, split: FitSplit, xs: np.nd
             model.physics_, model.learner_, lambda t, tr, s, nets, ph: raw_distributions(
                 model, t, tr, seed=s, nets=nets, physics=ph)[0],
             good, traces, split.codes, xs, ys, e_meas, seed, split.cv_ss,
-            cv_folds=int(model.cv_folds), val_fraction=model.val_fraction, gate=gate))
+            cv_folds=int(model.cv_folds), val_fraction=model.val_fraction, gate=gate,
+            n_fitted=cv_plus_folds(model, len(good))))
     elif len(split.val) and gate is not None:  # no calibration trips: the validation ones
         dist = raw_distributions(model, good.iloc[split.val], traces, seed=int(seed))[0][0]
         fit_gate(model, gate, good, split, e_meas, dist, split.val, "validation")
@@ -212,7 +219,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
 
     ``planned`` (a :class:`~hybridev.learning.planned.PlannedTripCalibrator`) only when
     most training trips had a logged trace (``domain_.needs_trace``): the trips the
-    conformal step scored (CV+: every trip by the fold model that did not see its day;
+    conformal step scored (CV+: the held-out trips of every fitted fold, by the fold
+    model that did not see their day;
     split: the held-out trips by the final model) are predicted again *without* their
     traces, against their measured energy (and, when the traces log elevation, again
     with their logged net grade: ``planned.graded_``, for planned trips given a
@@ -227,8 +235,11 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     if cp is None:
         return None, None, domain
     cv = cal.folds()
-    if cv:
-        fold, idx = np.asarray(cp.fold, int), np.arange(len(good))
+    if cv:  # every trip's fold; the scored ones are those of the fitted folds
+        fold = cv_fold_assignment(split.codes, int(model.cv_folds), split.cv_ss)
+        idx = np.flatnonzero(fold < len(cv))
+        if len(idx) != cp.n_calibration:
+            raise RuntimeError("CV+ folds do not match the calibration scores")
     else:
         fold, idx = np.full(len(good), -1), np.asarray(split.cal, int)
         fold[idx] = 0
@@ -241,10 +252,11 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # OutOfDomainWarning of the scored trips
                 if cv:
-                    dists = raw_distributions(model, trips, None, seed=int(seed), nets=cv,
-                                              physics=cal.fold_physics_ or None)[0]
-                    return (np.stack([d.mean() for d in dists])[fold, idx],
-                            np.stack([d.std() for d in dists])[fold, idx])
+                    dists = raw_distributions(model, trips.iloc[idx], None, seed=int(seed),
+                                              nets=cv, physics=cal.fold_physics_ or None)[0]
+                    rows = np.arange(len(idx))
+                    return (np.stack([d.mean() for d in dists])[fold[idx], rows],
+                            np.stack([d.std() for d in dists])[fold[idx], rows])
                 dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
                 return dist.mean(), dist.std()
 
@@ -252,7 +264,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
             mu, sd = scored(trips)
             return PlannedTripCalibrator().fit(
                 e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
-                conditions=conditions_of(trips.iloc[idx]), fold=fold[idx] if cv else None)
+                conditions=conditions_of(trips.iloc[idx]),
+                fold=fold[idx] if len(cv) > 1 else None)  # one fold: blocks, as split
 
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))

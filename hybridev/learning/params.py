@@ -9,6 +9,7 @@ calibration a fit on ``n`` trips runs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from types import MappingProxyType
 
@@ -21,7 +22,7 @@ from hybridev.learning.inputs import _check_range
 from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS
 
-__all__ = ["CONFORMAL_MODES", "CV_PLUS_MAX_TRIPS", "PAPER_CONFIG", "PARAMETERS_DOC",
+__all__ = ["CONFORMAL_MODES", "CV_PLUS_MAX_TRIPS", "CV_PLUS_RAMP_TRIPS", "PAPER_CONFIG", "PARAMETERS_DOC",
            "VAL_FRACTION", "HybridParams", "check_params", "conformal_mode", "feature_names"]
 
 PAPER_CONFIG = MappingProxyType({
@@ -43,6 +44,12 @@ CV_PLUS_MAX_TRIPS = 250
 conformal (a 15 % split then holds >= 37 calibration trips; CV+ costs ``cv_folds``
 extra ensemble trainings and ``cv_folds`` extra network passes per prediction)."""
 
+CV_PLUS_RAMP_TRIPS = 150
+"""From this many trips up to :data:`CV_PLUS_MAX_TRIPS`, ``conformal="auto"`` fits only
+``J`` of the ``cv_folds`` fold models, ``J`` falling linearly to 1 (:func:`cv_plus_folds`):
+each added trip changes the fit's cost by at most one fold's training, so fit time has
+no cliff at the switch to split conformal (issue 34)."""
+
 
 def feature_names(model) -> tuple[str, ...]:
     """The network inputs of ``model`` (its ``features``, else its class's default)."""
@@ -57,6 +64,22 @@ def conformal_mode(model, n_trips: int) -> str:
     if model.conformal == "auto":
         return "cv+" if n_trips < CV_PLUS_MAX_TRIPS else "split"
     return model.conformal
+
+
+def cv_plus_folds(model, n_trips: int) -> int:
+    """``J``, the CV+ folds that get a fold model in a fit on ``n_trips`` trips.
+
+    ``conformal="auto"``: ``clip(ceil(K (N_hi - n) / (N_hi - N_lo)), 1, K)`` with ``K =
+    cv_folds``, ``N_lo =`` :data:`CV_PLUS_RAMP_TRIPS`, ``N_hi =`` :data:`CV_PLUS_MAX_TRIPS`:
+    all ``K`` folds up to ``N_lo`` trips, one just below ``N_hi``. An explicit
+    ``conformal="cv+"`` always fits all ``K``
+    (:func:`hybridev.learning.cvplus.fit_cv_plus`).
+    """
+    k = int(model.cv_folds)
+    if model.conformal != "auto":
+        return k
+    span = CV_PLUS_MAX_TRIPS - CV_PLUS_RAMP_TRIPS
+    return min(max(math.ceil(k * (CV_PLUS_MAX_TRIPS - int(n_trips)) / span), 1), k)
 
 
 def _check_flag(name: str, value) -> None:
@@ -168,7 +191,9 @@ PARAMETERS_DOC = """
         ``1 - alpha`` in practice; 90 % intervals from 9 trips on). ``"split"``:
         ``conformal_fraction`` of the trips held out (guarantee ``>= 1 - alpha``,
         needs ``n_cal >= 9`` held-out trips for 90 %). ``"auto"`` (default):
-        CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal from there on.
+        CV+ below :data:`CV_PLUS_MAX_TRIPS` trips, split conformal from there on;
+        from :data:`CV_PLUS_RAMP_TRIPS` trips on, fewer fold models the closer to the
+        switch (:func:`cv_plus_folds`).
     cv_folds : int
         Folds of the CV+ step (default 5; fewer when there are fewer groups).
     mondrian : bool

@@ -1,5 +1,6 @@
 """Tests of the CV+ step of HybridModel.fit (hybridev.learning.cvplus) and of groups=."""
 
+import itertools
 import warnings
 
 import numpy as np
@@ -177,3 +178,39 @@ def test_new_fits_use_cross_conformal_and_old_files_keep_cv_plus(data, tmp_path)
     with pytest.raises(ValueError, match="cv_interval"):
         Calibrator().set_arrays({**doc, "cv_interval": "jackknife"}, arrays,
                                 learner=m.learner_, posterior=m.physics_.posterior_)
+
+
+def test_fold_ramp_schedule_steps_by_one_fold():
+    from hybridev.learning.params import CV_PLUS_MAX_TRIPS, CV_PLUS_RAMP_TRIPS, cv_plus_folds
+    m = HybridModel()
+    js = [cv_plus_folds(m, n) for n in range(2, CV_PLUS_MAX_TRIPS)]
+    assert js[0] == 5 and cv_plus_folds(m, CV_PLUS_RAMP_TRIPS) == 5
+    assert cv_plus_folds(m, CV_PLUS_MAX_TRIPS - 1) == 1
+    assert all(a - b in (0, 1) for a, b in itertools.pairwise(js))  # one fold a step
+    assert cv_plus_folds(HybridModel(conformal="cv+"), CV_PLUS_MAX_TRIPS - 1) == 5
+    assert cv_plus_folds(HybridModel(cv_folds=10), CV_PLUS_MAX_TRIPS - 1) == 1
+
+
+def test_partial_folds_score_only_their_trips_and_survive_save_load(data, tmp_path):
+    # 229 trips: 2 of the 5 fold models; their held-out trips are the scores
+    from hybridev.learning.cvplus import cv_fold_assignment
+    d = data.head(229)
+    m = HybridModel(**(FAST | {"max_epochs": 2})).fit(d, seed=0, groups="day")
+    cp = m.conformal_
+    assert m.fit_info_["conformal"] == "cv+" and m.fit_info_["cv_folds"] == cp.n_folds == 2
+    assert len(m.cv_nets_) == 2
+    codes = np.unique(d["day"].to_numpy(), return_inverse=True)[1]
+    fold = cv_fold_assignment(codes, 5, np.random.SeedSequence(0).spawn(3)[2])
+    assert np.array_equal(cp.fold, fold[fold < 2])  # the fitted folds' trips, in order
+    assert 0.3 * len(d) < cp.n_calibration < 0.5 * len(d)
+    for g in np.unique(d.day):  # whole days per fold
+        assert len(np.unique(fold[(d.day == g).to_numpy()])) == 1
+    m.save(tmp_path / "m")
+    back = HybridModel.load(tmp_path / "m")
+    test = data.iloc[229:].drop(columns=["energy_kwh"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        a, b = m.predict_interval(test, 0.9), back.predict_interval(test, 0.9)
+    cols = ["energy_kwh_lo", "energy_kwh_hi"]
+    assert np.isfinite(a[cols].to_numpy()).all()
+    np.testing.assert_allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-5)
