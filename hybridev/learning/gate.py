@@ -126,7 +126,8 @@ class ResidualGate:
             ev_lin["alpha"] = float(lin.alpha_)
             ev["candidates"] = {"networks": {**ev, "weight": w},
                                 "linear": {**ev_lin, "weight": w_lin}}
-            self.linear_, self._fit_rows = lin, (x, np.asarray(distance_km, float))
+            self.linear_ = lin  # its out-of-fold predictions score the trips it saw
+            self._fit_rows = (x, np.asarray(distance_km, float), ok, lin.oof_)
             if ev_lin["mape_gated"] < ev["mape_gated"] - 1e-9:
                 self.learner_ = "linear"
                 w, ev = w_lin, {**ev_lin, "candidates": ev["candidates"]}
@@ -192,13 +193,20 @@ class ResidualGate:
 
     def gated(self, dist: EnergyDistribution) -> EnergyDistribution:
         """An ungated raw distribution of the trips :meth:`fit` saw, with the gate applied
-        to its members' means (the line's scale from the distribution's own physics)."""
-        x = scale = None
-        if self.learner_ == "linear":
-            x, d = self._fit_rows
+        to its members' means. With the linear learner, each trip gets the line's
+        out-of-fold correction (the line was fitted on these trips: its in-sample
+        corrections would make their conformal scores too small), its scale from the
+        distribution's own physics."""
+        means = dist.residual_mean_kwh
+        if self.learner_ == "linear":  # the line's own out-of-fold corrections: scores of
+            x, d, ok, oof = self._fit_rows  # trips it was fitted on are not in-sample
             scale = self._scale(dist.physics_draws_kwh.mean(axis=0), d)
-        return EnergyDistribution(dist.physics_draws_kwh,
-                                  self.apply(dist.residual_mean_kwh, x, scale),
+            rel = self.linear_.predict(x)
+            rel[ok] = oof
+            means = np.broadcast_to(self.weight_ * rel * scale, np.shape(means)).astype(float)
+        else:
+            means = self.apply(means)
+        return EnergyDistribution(dist.physics_draws_kwh, means,
                                   dist.residual_std_kwh, spread_factor=dist.spread_factor)
 
     def summary(self) -> dict:

@@ -79,7 +79,11 @@ def test_gate_chooses_the_line_when_it_beats_the_networks(seed):
     np.testing.assert_allclose(out[0], gate.weight_ * gate.linear_.predict(x) * e_p)
     assert out.shape == (3, 80) and np.all(out[0] == out[2])
     dist = EnergyDistribution(e_p[None, :].repeat(4, axis=0), members, np.ones((3, 80)))
-    np.testing.assert_allclose(gate.gated(dist).residual_mean_kwh, out)
+    # the trips the line was fitted on are scored with its out-of-fold corrections,
+    # not its in-sample ones (which would make their conformal scores too small)
+    scored = gate.gated(dist).residual_mean_kwh
+    np.testing.assert_allclose(scored, np.tile(gate.weight_ * gate.linear_.oof_ * e_p, (3, 1)))
+    assert not np.allclose(scored, out)
     with pytest.raises(ValueError, match="inputs and scale"):
         gate.apply(members)
 
