@@ -42,7 +42,7 @@ def soc_drop_estimate(vehicle: VehicleParams, distance_m, duration_s) -> np.ndar
     Examples
     --------
     >>> round(float(soc_drop_estimate(VehicleParams(), 100e3, 3600.0)), 3)  # 100 km at 100 km/h
-    0.188
+    0.18
     """
     d = np.asarray(distance_m, dtype=float)
     v = d / np.asarray(duration_s, dtype=float)
