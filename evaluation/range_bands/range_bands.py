@@ -35,7 +35,17 @@ Set-up
   its own trip lengths (uniform 20-200 km, as ``make_trips``; each a truth trip
   on its own speed trace, starting at the SoC the legs before left): a single
   synthesised trace of 500 km would have 1,000 steps of half a kilometre and
-  far fewer stops per km than any trip the car makes. ``eta`` is drawn *once*
+  far fewer stops per km than any trip the car makes. The same holds, less
+  strongly, for every truth trip longer than 125 drive cycles of its profile
+  (1,000 steps, at least 8 per cycle; :func:`hybridev.apps.drive.additive_leg_km`:
+  62 km at 40 km/h in "normal" mode, 42 km in "aggressive"): its cycles are
+  stretched, and its consumption per km falls with its length (at 40 km/h,
+  20 degC, "normal", mean of 40 traces: 15.8 kWh/100 km at 20-80 km, 14.6 at
+  112 km, 13.4 at 200 km). A drive cut into such legs would have a range that
+  depends on where it is cut, which no car has: the truth is additive over
+  distance only up to that length. So the legs are drawn uniform from 20 km to
+  the shorter of 200 km and that length (the truth's own trip lengths where
+  its per-trip definition is additive). ``eta`` is drawn *once*
   per drive (one day: the whole drive has the same unexplained factor), and
   the **true range** is the distance at which the drive's cumulative energy
   reaches the budget ``(s0 - 0.1) C`` (linear within the leg that crosses it).
@@ -63,6 +73,7 @@ from matplotlib.figure import Figure
 
 import hybridev
 from hybridev import HybridModel, make_trips, simulate
+from hybridev.apps.drive import additive_leg_km
 from hybridev.apps.range import predict_range, quantile_column
 from hybridev.apps.range_plot import plot_soc_fan, soc_fan
 from hybridev.core.fileio import atomic_path
@@ -119,7 +130,8 @@ def true_drive(cond: pd.DataFrame, s0, factor, cap, budget, seed) -> tuple[np.nd
                                                                             np.ndarray]:
     """The truth's long drive: consecutive truth trips of 20-200 km (its own trip lengths).
 
-    Leg lengths are drawn uniform over the truth's trip distances (``default_rng(seed)``),
+    Leg lengths are drawn uniform over the truth's trip distances up to the length its
+    1000-step trace keeps the drive cycle (``default_rng(seed)``),
     each leg a truth trip with its own trace key, starting at the SoC the previous legs
     left; the drive's noise factor ``factor`` is one per drive. Legs are added until
     every drive has used ``budget``. Returns the distances at the leg ends and the
@@ -129,10 +141,12 @@ def true_drive(cond: pd.DataFrame, s0, factor, cap, budget, seed) -> tuple[np.nd
     n = len(cond)
     ends, cum = [np.zeros(n)], [np.zeros(n)]
     key = cond["trip_id"].to_numpy(np.int64) * 1000
+    hi = np.clip(additive_leg_km(cond["avg_speed_kmh"].to_numpy(float),
+                                 cond["mode"].to_numpy(object), 1000), *TRUTH_LEG_KM)
     for k in range(200):
         if (cum[-1] >= budget).all():
             break
-        leg = rng.uniform(*TRUTH_LEG_KM, n)
+        leg = rng.uniform(TRUTH_LEG_KM[0], hi, n)
         soc = np.clip(s0 - cum[-1] / cap, 1e-3, 1.0)
         e = true_energy(cond.assign(distance_km=leg, soc_initial=soc, trip_id=key + k), factor)
         ends.append(ends[-1] + leg)
@@ -303,7 +317,7 @@ def main(argv=None) -> int:
     lo_t, hi_t = TARGET
     cells_ok = by_t.inside.between(lo_t, hi_t).all() and by_v.inside.between(lo_t, hi_t).all()
     sets = grouped(df, "set")
-    leg = float(df["leg_km"].iloc[0])
+    leg = df["leg_km"]
     rho = df["leg_noise_correlation"]
     lines = [
         "# Range bands on a known truth",
@@ -319,7 +333,9 @@ def main(argv=None) -> int:
         f"{n_cond} between them (speeds {', '.join(f'{v:g}' for v in BETWEEN_SPEEDS_KMH)} "
         f"km/h, temperatures {', '.join(f'{t:g}' for t in BETWEEN_TEMPS_C)} degC); one noise "
         "draw per drive; true range by direct simulation of the truth. The range is a drive "
-        f"of legs of {leg:.1f} km (the median training trip); the legs' noise correlation is "
+        f"of legs of {leg.max():.1f} km (the median training trip) or shorter where a leg "
+        f"that long would stretch its trace's drive cycles ({leg.min():.1f}-{leg.max():.1f} km, "
+        f"median {leg.median():.1f} km); the legs' noise correlation is "
         f"{rho.median():.2f} (median; {rho.min():.2f}-{rho.max():.2f}).",
         "",
         "## Coverage of the 10-90 % band (target 75-85 % at every speed and temperature)",

@@ -7,8 +7,9 @@ With the energy budget ``B = (s0 - s_reserve) C`` the range ``R`` satisfies
 
 **A drive, not one giant trip** (:mod:`hybridev.apps.drive`). The drive at
 the queried speed and temperature is a sequence of legs of a familiar length
-``L`` (the median training trip, :func:`~hybridev.apps.drive.leg_length_km`),
-each a planned trip that the model predicts from its summary: the first leg
+``L`` (the median training trip, :func:`~hybridev.apps.drive.leg_length_km`,
+shortened per condition to the length whose synthetic trace keeps its drive
+cycle, :func:`~hybridev.apps.drive.leg_lengths_km`), each a planned trip that the model predicts from its summary: the first leg
 starts soaked, every later leg follows without a stop (``parked_min = 0``), so
 the warm-up is paid once. ``E(r)`` for ``r <= L`` is the first leg alone
 (interpolated linearly between soaked legs of ``L / 16 ... L``), and beyond it
@@ -57,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.apps.drive import drive_distribution, leg_correlation, leg_length_km, predict_legs
+from hybridev.apps.drive import drive_distribution, leg_correlation, leg_lengths_km, predict_legs
 from hybridev.core.checks import check_seed
 from hybridev.core.errors import PhysicsFallbackWarning
 from hybridev.core.plugins import entry_point, lazy_backend
@@ -185,7 +186,7 @@ _N_TYPES = len(_ANCHORS) + 2  # soaked anchors, a warm half leg, a warm leg
 class _Drive:
     """Legs of each condition, predicted once per conformal level."""
 
-    leg_km: float
+    leg_km: np.ndarray    # (n,) leg length per condition, km
     pieces: dict          # level -> LegPieces of the (n * _N_TYPES) legs, condition-major
     rho: np.ndarray       # (n,) noise correlation between legs
     physics_kwh: np.ndarray  # (n, _N_TYPES) physics energy of each leg (posterior median)
@@ -193,14 +194,14 @@ class _Drive:
     base: pd.DataFrame    # the conditions (n rows)
 
 
-def _legs(cond: pd.DataFrame, s0: np.ndarray, s_mid: np.ndarray, leg_km: float
+def _legs(cond: pd.DataFrame, s0: np.ndarray, s_mid: np.ndarray, leg_km: np.ndarray
           ) -> pd.DataFrame:
     """The leg table: per condition the soaked anchors, a warm half leg and a warm leg."""
     n = len(cond)
     rows = cond.iloc[np.repeat(np.arange(n), _N_TYPES)].reset_index(drop=True)
     rows["trip_id"] = np.repeat(trace_keys(cond), _N_TYPES)
     frac = np.concatenate([_ANCHORS, [0.5, 1.0]])
-    rows["distance_km"] = np.tile(frac * leg_km, n)
+    rows["distance_km"] = (np.asarray(leg_km, float)[:, None] * frac[None, :]).ravel()
     warm = np.tile(np.arange(_N_TYPES) >= _T_HALF, n)
     rows["soc_initial"] = np.where(warm, np.repeat(s_mid, _N_TYPES), np.repeat(s0, _N_TYPES))
     rows["parked_min"] = np.where(warm, 0.0, np.nan)  # later legs follow without a stop
@@ -215,7 +216,7 @@ def _levels(probs: np.ndarray) -> np.ndarray:
 
 
 def _drive(model: HybridModel, cond: pd.DataFrame, s0, sr, seed: int, levels) -> _Drive:
-    leg_km = leg_length_km(model)
+    leg_km = leg_lengths_km(model, cond)
     legs = _legs(cond, s0, (s0 + sr) / 2.0, leg_km)
     pieces, table = {}, None
     for lv in np.unique(levels):
@@ -229,20 +230,21 @@ def _drive(model: HybridModel, cond: pd.DataFrame, s0, sr, seed: int, levels) ->
                   cond.reset_index(drop=True))
 
 
-def _weights(r: np.ndarray, leg_km: float) -> np.ndarray:
-    """Leg weights (n, G, _N_TYPES) of drives of length r (n, G), km.
+def _weights(r: np.ndarray, leg_km: np.ndarray) -> np.ndarray:
+    """Leg weights (n, G, _N_TYPES) of drives of length r (n, G), km; ``leg_km`` (n,).
 
     Up to one leg: the soaked leg, interpolated linearly between the anchors
     (and to zero at zero); beyond: one soaked leg plus ``(r - L) / L`` warm legs.
     """
-    a = np.concatenate([[0.0], _ANCHORS * leg_km])
+    x = r / np.asarray(leg_km, float).reshape(-1, 1)  # in legs
+    a = np.concatenate([[0.0], _ANCHORS])
     w = np.zeros((*r.shape, _N_TYPES))
-    rr = np.minimum(r, leg_km)
-    j = np.clip(np.searchsorted(a, rr, side="right") - 1, 0, len(a) - 2)
-    t = (rr - a[j]) / (a[j + 1] - a[j])
+    xx = np.minimum(x, 1.0)
+    j = np.clip(np.searchsorted(a, xx, side="right") - 1, 0, len(a) - 2)
+    t = (xx - a[j]) / (a[j + 1] - a[j])
     for k in range(len(_ANCHORS)):  # anchor k is knot k + 1 of a
         w[..., k] += np.where(j + 1 == k + 1, t, 0.0) + np.where(j == k + 1, 1.0 - t, 0.0)
-    w[..., _T_WARM] = np.maximum(r - leg_km, 0.0) / leg_km
+    w[..., _T_WARM] = np.maximum(x - 1.0, 0.0)
     return w
 
 

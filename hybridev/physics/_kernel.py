@@ -31,24 +31,27 @@ from hybridev.physics.kinematics import MIN_STEPS_PER_CYCLE, keyed_normals_ragge
 
 __all__ = ["N_ACC", "fused_available", "synthetic_sums"]
 
-N_ACC = 11
+N_ACC = 12
 """Per-trip accumulators of the kernel: the moments ``[v, v^2, v^3, m a v]`` over
 driving intervals, the same over (uncapped) braking ones, the moving intervals,
-the top speed and the braking intervals at the regen limit. One more per-interval
-statistic is one more column of ``out`` here."""
+the top speed, the braking intervals at the regen limit and the sum of their SoC
+derating factors. One more per-interval statistic is one more column of ``out`` here."""
 
 _ENV = "HYBRIDEV_NO_NUMBA"
 _compiled = None  # the jitted kernel, or False when numba cannot be imported
 
 
 def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2, h_hi, w,
-                  vb, d_m, duration, dt, m_over_dt, grade_force, brake_limit_w, z, z_start,
-                  n_steps, k_aero, lin_n_per_mps, moving_sum_mps, out):  # pragma: no cover
+                  vb, d_m, duration, dt, m_over_dt, grade_force, brake_limit_w, derate_a,
+                  derate_b, z, z_start, n_steps, k_aero, lin_n_per_mps, moving_sum_mps,
+                  out):  # pragma: no cover
     """Synthesise each trip's trace and accumulate its sums into ``out`` (n, N_ACC).
 
     Same arithmetic, operation by operation, as ``synthesize_speed_trace``
     followed by ``_trace_sums`` (one grade per trip); only the order of the
-    sums differs. Compiled by numba; plain Python also runs it (slowly).
+    sums differs. The regen limit of interval ``k`` is ``brake_limit_w`` times the
+    SoC derating factor ``clip(derate_a + derate_b (k - 1/2) / n_steps, 0, 1)``
+    (:mod:`hybridev.physics.derate`). Compiled by numba; plain Python also runs it (slowly).
     """
     n = ratio.shape[0]
     v = np.empty(n_steps + 1)
@@ -80,8 +83,9 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
         floor = base + (d_m[i] - base * duration[i] - swing_dist) / duration[i]
         # force sums over the intervals, split by the sign of the wheel force
         mdt, gf, lim = m_over_dt[i], grade_force[i], -brake_limit_w[i]
+        da, db = derate_a[i], derate_b[i] / n_steps
         p0 = p2 = p3 = p4 = q0 = q2 = q3 = q4 = 0.0
-        moving = capped = 0.0
+        moving = capped = capped_f = 0.0
         prev = max(v[0] + floor, 0.0)
         vmax = prev
         for k in range(1, n_steps + 1):
@@ -105,18 +109,21 @@ def _trips_kernel(ratio, inv_fa, one_minus_fb, inv_fb, n_cyc, h0, sig, half_sig2
                 p2 += v2
                 p3 += v3
                 p4 += iv
-            elif force * vm < lim:  # braking power beyond the regen limit: only its time
-                capped += 1.0
             else:
-                q0 += vm
-                q2 += v2
-                q3 += v3
-                q4 += iv
+                f = min(max(da + db * (k - 0.5), 0.0), 1.0)  # SoC derating along the trip
+                if force * vm < lim * f:  # braking power beyond the regen limit: only its time
+                    capped += 1.0
+                    capped_f += f
+                else:
+                    q0 += vm
+                    q2 += v2
+                    q3 += v3
+                    q4 += iv
             prev = cur
         o = out[i]
         o[0], o[1], o[2], o[3] = p0, p2, p3, p4
         o[4], o[5], o[6], o[7] = q0, q2, q3, q4
-        o[8], o[9], o[10] = moving, vmax, capped
+        o[8], o[9], o[10], o[11] = moving, vmax, capped, capped_f
 
 
 def _uniforms_kernel(k, counts, start, u):  # pragma: no cover (compiled)
@@ -184,7 +191,8 @@ _PROFILE_FIELDS = ("max_accel_mps2", "pke_mps2", "cycle_period_s", "amplitude_cv
 
 
 def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_rad,
-                   n_steps: int, seed: int, vehicle, *, brake_limit_w=None, kernel=None):
+                   n_steps: int, seed: int, vehicle, *, brake_limit_w=None, derate=None,
+                   kernel=None):
     """Force sums of the synthetic traces of trips, without forming the traces.
 
     Parameters
@@ -202,7 +210,11 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         Fixes the sign split.
     brake_limit_w : numpy.ndarray, shape (n,), W, optional
         Braking wheel power beyond which regeneration runs at its limit
-        (``stats_build._regen_threshold``); ``inf`` or None: no limit.
+        (``stats_build._regen_threshold``, before the SoC derating); ``inf`` or None: no limit.
+    derate : tuple of numpy.ndarray (n,), optional
+        ``(a, b)``: interval ``k``'s limit is ``brake_limit_w`` times
+        ``clip(a + b (k - 1/2) / n_steps, 0, 1)`` (:func:`hybridev.physics.derate.derate_line`);
+        None: no derating.
     kernel : tuple of callables, optional
         The kernels ``(trips, uniforms)`` to run (default: the compiled ones);
         tests pass the plain Python functions (``uniforms`` None: numpy).
@@ -210,10 +222,11 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     Returns
     -------
     tuple or None
-        ``(sums_pos, sums_neg, duration_s, moving_s, max_speed_kmh, capped_s)``,
+        ``(sums_pos, sums_neg, duration_s, moving_s, max_speed_kmh, capped_s, capped_fs)``,
         the sums as lists ``[roll, aero, lin, rest]`` of arrays (n,) in kWh as
         ``_trace_sums`` returns them (braking sums without the intervals at the
-        regen limit, whose time is ``capped_s``); None when the compiled kernel
+        regen limit, whose time is ``capped_s``, and ``capped_fs`` that time weighted
+        by the derating factor); None when the compiled kernel
         is unavailable.
     """
     kern = kernel or _kernel()
@@ -252,10 +265,14 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
     cos_th, sin_th = np.cos(th), np.sin(th)
     limit = (np.full(n, np.inf) if brake_limit_w is None
              else np.broadcast_to(np.asarray(brake_limit_w, dtype=float), (n,)))
+    da, db = ((np.ones(n), np.zeros(n)) if derate is None else
+              (np.broadcast_to(np.asarray(derate[0], float), (n,)),
+               np.broadcast_to(np.asarray(derate[1], float), (n,))))
     out = np.empty((n, N_ACC))
     kern(n_cyc / n_steps, 1.0 / fa, 1.0 - fb, 1.0 / fb, n_cyc, h0, sig, 0.5 * sig**2,
          np.minimum(h_cap, 2.0 * h0), w, vb_mps, d * 1000.0, duration, dt, m / dt,
-         (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th, limit, z, z_start,
+         (veh.rolling_resistance_coef * m * g) * cos_th + (m * g) * sin_th, limit,
+         np.ascontiguousarray(da), np.ascontiguousarray(db), z, z_start,
          int(n_steps), 0.5 * veh.air_density_kg_m3 * veh.drag_area_m2,
          float(veh.linear_drag_n_per_mps), 2.0 * MOVING_MPS, out)
     cst = dt / _J_PER_KWH
@@ -266,4 +283,5 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         aero = (0.5 * veh.air_density_kg_m3) * s3 * cst
         lin = s2 * cst
         sums.append([roll, aero, lin, rest_grade + s4 * cst])
-    return sums[0], sums[1], dt * n_steps, out[:, 8] * dt, out[:, 9] * 3.6, out[:, 10] * dt
+    return (sums[0], sums[1], dt * n_steps, out[:, 8] * dt, out[:, 9] * 3.6, out[:, 10] * dt,
+            out[:, 11] * dt)

@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybridev.physics.climate import _profile_values, hvac_power_kw
+from hybridev.physics.derate import regen_derate_factor, soc_drop_estimate
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
 from hybridev.physics.thermal import cold_factors, warmup_energy_kwh
 
@@ -207,6 +208,9 @@ def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
                    v: np.ndarray, dt, soc=None):
     """(mult / eta_d, eta_r, aux kW, regen limit kW), each a scalar or an (n_trips, 1) column.
 
+    The regen limit is per interval, ``(..., n_intervals)``, when ``soc`` is given: derated
+    along the trip's SoC (:mod:`hybridev.physics.derate`).
+
     With the continuous climate model the cold-weather factors scale ``mult``,
     ``eta_r`` and the regen limit, and the warm-up energy is spread evenly
     over the trip as extra auxiliary power.
@@ -223,7 +227,14 @@ def _battery_terms(veh: VehicleParams, profile: ProfileLike, temperature_c,
             s = _per_trip(soc, v, "soc")
             if np.any(np.isfinite(s) & ((s < 0) | (s > 1))):
                 raise ValueError(f"soc={soc!r} is outside the allowed range [0, 1] (NaN: unknown)")
-        cap = _per_trip(regen_limit_kw(veh, soc), v, "soc")
+        cap = float(veh.regen_max_kw)
+        if soc is not None:  # derated along the trip's SoC (hybridev.physics.derate)
+            n_int = v.shape[-1] - 1
+            dur = dt * n_int
+            dist = (0.5 * (v[..., 1:] + v[..., :-1])).sum(axis=-1, keepdims=True) * dt
+            drop = soc_drop_estimate(veh, dist, dur)
+            frac = (np.arange(n_int) + 0.5) / n_int
+            cap = cap * regen_derate_factor(veh, _per_trip(soc, v, "soc"), drop, frac)
     if veh.climate_model == "continuous":
         trac, regen = cold_factors(t, veh)
         mult, eta_r = mult * trac, eta_r * regen
@@ -283,7 +294,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
     soc : float or array_like (n_trips,), optional
         State of charge at the trip's start (NaN or None: unknown); derates
-        the regenerative power limit (:func:`regen_limit_kw`).
+        the regenerative power limit along the trip (:mod:`hybridev.physics.derate`).
 
     Returns
     -------

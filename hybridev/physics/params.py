@@ -228,9 +228,12 @@ class VehicleParams:
         limited"). 0.9 by default: owners report the limit from about 80 %
         (a car that shows "Regenerative braking temporarily reduced" until
         its pack is "around 75 °F (24°C)" and "below say, 80%", willemsplanet.com,
-        2021-12-17) to about 93 % (Tesla forums, "Limited Regen", 2019). Applied per trip from its starting SoC
-        (``soc_initial``, or the first logged ``soc``) when known, and only to
-        a finite ``regen_max_kw``.
+        2021-12-17) to about 93 % (Tesla forums, "Limited Regen", 2019). Applied along
+        the trip's SoC, which falls from its start (``soc_initial``, or the first
+        logged ``soc``) as the trip uses energy (:mod:`hybridev.physics.derate`):
+        a car leaving at SoC 1.0 regains its regen as the pack drains below the
+        threshold, as the owners' reports describe. Only when the start SoC is
+        known, and only for a finite ``regen_max_kw``.
     road_load_source : {"datasheet", "coastdown"}
         Where ``C_r``, ``C_dA`` and ``b`` come from. ``"coastdown"`` (set by
         :meth:`from_coastdown`) makes the calibration's priors on them tight

@@ -7,12 +7,13 @@ Reference implementation of the interval split (numpy): an interval with wheel
 power ``P_w`` (at the reference vehicle) is *driving* when ``P_w > 0``;
 otherwise it is *braking*, and a braking interval is *capped* when its
 recovered power would exceed the regenerative limit, i.e.
-``-P_w > P_lim / eta_r`` with ``P_lim`` = :func:`~hybridev.physics.forces.regen_limit_kw`
-(SoC-derated, before the cold factor, which scales ``eta_r`` and the limit
-alike and so cancels here) and ``eta_r`` the profile's regen efficiency.
+``-P_w > P_lim f / eta_r`` with ``P_lim`` = ``regen_max_kw`` (before the cold
+factor, which scales ``eta_r`` and the limit alike and so cancels here),
+``f`` the interval's SoC derating factor along the trip
+(:mod:`hybridev.physics.derate`) and ``eta_r`` the profile's regen efficiency.
 Driving intervals feed the ``_pos`` sums, uncapped braking ones the ``_neg``
-sums, capped ones only their duration (``regen_capped_kwh = cold x P_lim x
-t_capped``).
+sums, capped ones only their duration and their derated duration
+(``regen_capped_kwh = cold x P_lim x sum(f dt)`` over capped intervals).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import pandas as pd
 
 from hybridev.physics._kernel import synthetic_sums
 from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.derate import derate_line, soc_drop_estimate
 from hybridev.physics.forces import MOVING_MPS, _moving_steps, regen_limit_kw
 from hybridev.physics.kinematics import _check_steps, profile_table, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
@@ -55,17 +57,27 @@ def _components(vm, acc, cos_th, sin_th, dt, veh: VehicleParams):
     return (roll, aero, lin, rest), pw
 
 
-def _regen_threshold(veh: VehicleParams, eta_r_profile, soc, n: int):
-    """(limit kW, braking wheel-power threshold W) per row, each shape (n,).
+def _regen_threshold(veh: VehicleParams, eta_r_profile, n: int):
+    """(limit kW, braking wheel-power threshold W) per row before the SoC derating, each (n,).
 
     ``inf`` without a limit (paper preset) or with zero regen efficiency.
     """
-    cap = np.broadcast_to(np.asarray(regen_limit_kw(veh, None if soc is None else
-                                                    np.broadcast_to(soc, (n,))), float), (n,))
+    cap = np.full(n, float(regen_limit_kw(veh)))
     eta = np.broadcast_to(np.asarray(eta_r_profile, dtype=float), (n,))
     with np.errstate(divide="ignore", invalid="ignore"):
         thr = np.where(eta > 0, cap * 1e3 / np.where(eta > 0, eta, 1.0), np.inf)
     return cap, np.where(np.isfinite(cap), thr, np.inf)
+
+
+def _derate(veh: VehicleParams, soc, thr, distance_m, duration_s):
+    """Line ``(a, b)`` (n,) of each trip's derating factor ``clip(a + b x, 0, 1)``.
+
+    ``a = 1, b = 0`` (none) without a start SoC or without a finite limit.
+    """
+    n = len(thr)
+    s = np.full(n, np.nan) if soc is None else np.broadcast_to(np.asarray(soc, float), (n,))
+    s = np.where(np.isfinite(thr), s, np.nan)
+    return derate_line(veh, s, soc_drop_estimate(veh, distance_m, duration_s))
 
 
 def _profile_consts(profile, n: int):
@@ -96,11 +108,12 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
               start_temperature_c=None, cooling_kw=None, moving_s=None,
               parked_s=None, heating_grid_kw=None, offset_grid: bool = True,
-              regen_cap_kw=None, capped_s=None) -> PhysicsStats:
+              regen_cap_kw=None, capped_s=None, capped_fs=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
 
-    ``regen_cap_kw`` (per row, before the cold factor) and ``capped_s`` (time
-    spent at the regen limit) give ``regen_capped_kwh``.
+    ``regen_cap_kw`` (per row, before the cold factor and the SoC derating),
+    ``capped_s`` (time spent at the regen limit) and ``capped_fs`` (that time
+    weighted by the derating factor, default ``capped_s``) give ``regen_capped_kwh``.
     ``climate_kw`` (mean steady climate power, e.g. from per-step logged
     temperatures) and ``start_temperature_c`` (warm-up) default to the values
     at ``temperature_c``; ``parked_s`` (per row, NaN: soaked) scales the warm-up.
@@ -120,7 +133,8 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
     if capped_s is not None and regen_cap_kw is not None:
         cs = np.broadcast_to(np.asarray(capped_s, dtype=float), (n,))
         on = cs > 0  # inf * 0 would be NaN: only capped rows have a finite limit
-        capped[on] = np.broadcast_to(np.asarray(regen_cap_kw, float), (n,))[on] * cs[on] / 3600.0
+        fs = cs if capped_fs is None else np.broadcast_to(np.asarray(capped_fs, float), (n,))
+        capped[on] = np.broadcast_to(np.asarray(regen_cap_kw, float), (n,))[on] * fs[on] / 3600.0
     if veh.climate_model == "continuous":
         cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
         trac, regen = cold_factors(t, veh)
@@ -158,7 +172,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
                       profile="normal", temperature_c=20.0, grade_rad=0.0, soc=None,
-                      _offset_grid: bool = True) -> PhysicsStats:
+                      _offset_grid: bool = True, _fs_out: list | None = None) -> PhysicsStats:
     """Statistics of uniformly sampled traces (same arguments as :func:`hybridev.trace_energy_kwh`).
 
     Parameters
@@ -171,7 +185,8 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     temperature_c : float or array_like (n_trips,), degC
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
     soc : float or array_like (n_trips,), optional
-        State of charge at each trip's start (derates the regen limit).
+        State of charge at each trip's start (derates the regen limit along
+        the trip, :mod:`hybridev.physics.derate`).
 
     Returns
     -------
@@ -206,27 +221,39 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
         th = np.broadcast_to(g, v.shape)
         th = 0.5 * (th[:, 1:] + th[:, :-1])
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
-    cap, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], soc, n)
-    thr = thr[:, None]
-    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh, thr[i:i + _SUB])
+    cap, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], n)
+    thr, frac = thr[:, None], None
+    if soc is not None and np.isfinite(thr).any():  # derated along the trip's SoC
+        n_int = v.shape[1] - 1
+        a, b = _derate(veh, soc, thr[:, 0], (v[:, 1:] + v[:, :-1]).sum(axis=1) * 0.5 * dt[:, 0],
+                       dt[:, 0] * n_int)
+        frac = np.clip(a[:, None] + b[:, None] * ((np.arange(n_int) + 0.5) / n_int), 0.0, 1.0)
+        thr = thr * frac
+    sums = [_trace_sums(v[i:i + _SUB], dt[i:i + _SUB], th[i:i + _SUB], veh, thr[i:i + _SUB],
+                        None if frac is None else frac[i:i + _SUB])
             for i in range(0, n, _SUB)]  # cache-sized blocks of trips
     sp, sn = ([np.concatenate([x[j][c] for x in sums]) for c in range(4)] for j in (0, 1))
     capped_s = np.concatenate([x[2] for x in sums]) * dt[:, 0]
+    capped_fs = np.concatenate([x[3] for x in sums]) * dt[:, 0]
+    if _fs_out is not None:  # trip_stats: the derated capped time, s (n,)
+        _fs_out.append(capped_fs)
     t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
                      max_speed_kmh=v.max(axis=1) * 3.6,
                      moving_s=_moving_steps(v)[:, 0] * dt[:, 0], offset_grid=_offset_grid,
-                     regen_cap_kw=cap, capped_s=capped_s)
+                     regen_cap_kw=cap, capped_s=capped_s, capped_fs=capped_fs)
 
 
 def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams,
-                thr_w=None):
+                thr_w=None, frac=None):
     """(roll, aero, lin, rest) sums over driving and (uncapped) braking intervals, kWh.
 
     ``v`` (n, N + 1) m/s, ``dt`` (n, 1) s, ``th`` interval grades (n, 1) or (n, N) rad,
-    ``thr_w`` (n, 1) braking wheel power (W) above which regeneration is at
-    its limit (``inf`` or None: no limit). Returns ``[pos sums], [neg sums],
-    capped`` with ``capped`` the number of capped intervals per trace, (n,).
+    ``thr_w`` (n, 1) or (n, N) braking wheel power (W) above which regeneration
+    is at its limit (``inf`` or None: no limit), ``frac`` (n, N) the intervals'
+    SoC derating factors (None: 1). Returns ``[pos sums], [neg sums], capped,
+    capped_f`` with ``capped`` the number of capped intervals per trace, (n,),
+    and ``capped_f`` the sum of their derating factors.
     Hot path: the sign of ``P_w`` is that of the road-load-plus-inertia force
     (``v > 0``; intervals with ``v = 0`` contribute nothing), and all signed
     sums come from one batched matrix product of per-interval moments with the
@@ -261,8 +288,10 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     np.greater(force, 0.0, out=mask[:, 0])
     np.subtract(1.0, mask[:, 0], out=mask[:, 1])
     n_capped = np.zeros(n)
+    f_capped = n_capped
     if cap is not None:
         n_capped = cap.sum(axis=1).astype(float)
+        f_capped = n_capped if frac is None else np.where(cap, frac, 0.0).sum(axis=1)
         mask[:, 1] -= cap  # capped braking: recovered P_lim dt, not in the sums
     s = np.matmul(a, mask.transpose(0, 2, 1))  # (n, k + 1, 2): sums over driving, braking
     c = dt / _J_PER_KWH  # (n, 1)
@@ -276,12 +305,12 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     lin = s[:, k - 2] * c
     rest = rest_grade + s[:, -1] * c
     comps = (roll, aero, lin, rest)
-    return [x[:, 0] for x in comps], [x[:, 1] for x in comps], n_capped
+    return [x[:, 0] for x in comps], [x[:, 1] for x in comps], n_capped, f_capped
 
 
 def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
                     profile="normal", temperature_c=None, parked_s=None,
-                    soc=None) -> PhysicsStats:
+                    soc=None, _fs_out: list | None = None) -> PhysicsStats:
     """Statistics of logged traces with a per-interval ``dt`` (no resampling).
 
     Interval ``k`` of a trip uses the mean of its two speed samples, the
@@ -309,8 +338,9 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
         Time parked before each trip (NaN or None: soaked to ambient); scales
         the warm-up (:func:`hybridev.physics.thermal.soak_fraction`).
     soc : float or array_like (n_trips,), optional
-        State of charge at each trip's start (derates the regen limit);
-        default: the first logged ``soc`` sample, else unknown (no derating).
+        State of charge at each trip's start (derates the regen limit along
+        the trip, :mod:`hybridev.physics.derate`); default: the first logged
+        ``soc`` sample, else unknown (no derating).
 
     Returns
     -------
@@ -331,20 +361,32 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
     if soc is None and traces.soc is not None:
         soc = traces.soc[traces.offsets[:-1]]
-    cap_kw, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], soc, n)
+    cap_kw, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], n)
     neg = ~pos
-    capped_s = np.zeros(n)
+    capped_s = capped_fs = np.zeros(n)
     capped = np.zeros(len(dt), dtype=bool)
+    thr_i = thr[trip]
     if np.isfinite(thr).any():  # braking energy beyond the limit over the interval
-        capped = neg & (pw_kwh * _J_PER_KWH < -thr[trip] * dt)
+        f = np.ones(len(dt))
+        if soc is not None:  # derated along the trip's SoC, by the interval's time fraction
+            dur = traces.duration_s()
+            a, b = _derate(veh, soc, thr, np.bincount(trip, 0.5 * (v[start] + v[nxt]) * dt,
+                                                      minlength=n), dur)
+            x = (0.5 * (traces.t_s[start] + traces.t_s[nxt]) - traces.t_s[traces.offsets[:-1]][trip])
+            f = np.clip(a[trip] + b[trip] * x / np.where(dur > 0, dur, 1.0)[trip], 0.0, 1.0)
+            thr_i = thr_i * f
+        capped = neg & (pw_kwh * _J_PER_KWH < -thr_i * dt)
         neg &= ~capped
         capped_s = np.bincount(trip, np.where(capped, dt, 0.0), minlength=n)
+        capped_fs = np.bincount(trip, np.where(capped, f * dt, 0.0), minlength=n)
+    if _fs_out is not None:  # trip_stats: the derated capped time, s (n,)
+        _fs_out.append(capped_fs)
     sp = [np.bincount(trip, np.where(pos, c, 0.0), minlength=n) for c in comps]
     sn = [np.bincount(trip, np.where(neg, c, 0.0), minlength=n) for c in comps]
     if traces.hidden_pke_j_per_kg is not None:  # stop-and-go a coarse log hides: spent in
         hid = veh.mass_kg * traces.hidden_pke_j_per_kg / _J_PER_KWH  # traction, regenerated
         sp[3] = sp[3] + hid  # as the trip's visible braking is, up to the regen limit
-        sn[3] = sn[3] - hid * (1.0 - _capped_share(pw_kwh, capped, thr, trip, dt, n))
+        sn[3] = sn[3] - hid * (1.0 - _capped_share(pw_kwh, capped, thr_i, trip, dt, n))
     if temperature_c is None:
         temperature_c = (traces.per_trip_mean(traces.temperature_c)
                          if traces.temperature_c is not None else 20.0)
@@ -359,7 +401,7 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
                      moving_s=moving,
                      parked_s=None if parked_s is None else np.broadcast_to(
                          np.asarray(parked_s, float), (n,)), heating_grid_kw=grid,
-                     regen_cap_kw=cap_kw, capped_s=capped_s)
+                     regen_cap_kw=cap_kw, capped_s=capped_s, capped_fs=capped_fs)
 
 
 def _capped_share(pw_kwh, capped, thr, trip, dt, n: int) -> np.ndarray:
@@ -374,7 +416,7 @@ def _capped_share(pw_kwh, capped, thr, trip, dt, n: int) -> np.ndarray:
     if not capped.any():
         return np.zeros(n)
     brake = np.bincount(trip, np.where(pw_kwh < 0, -pw_kwh, 0.0), minlength=n)
-    beyond = np.bincount(trip, np.where(capped, -pw_kwh - np.where(capped, thr[trip], 0.0)
+    beyond = np.bincount(trip, np.where(capped, -pw_kwh - np.where(capped, thr, 0.0)
                                         * dt / _J_PER_KWH, 0.0), minlength=n)
     return np.clip(np.divide(beyond, brake, out=np.zeros(n), where=brake > 0), 0.0, 1.0)
 
@@ -485,6 +527,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         soc0 = (col.to_numpy(float) if col.dtype == np.float64
                 else pd.to_numeric(col, errors="coerce").to_numpy(float)).copy()
     capped_s = np.zeros(len(trip))
+    capped_fs = np.zeros(len(trip))
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
     cooling = (climate_split_kw(temp[trip], veh)[1] if veh.climate_model == "continuous"
                else np.zeros(len(trip)))
@@ -499,11 +542,13 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         s_log = soc0[logged]
         if tr.soc is not None:  # no soc_initial: the trace's first SoC sample
             s_log = np.where(np.isfinite(s_log), s_log, tr.soc[tr.offsets[:-1]])
+        fs = []
         sl = stats_from_logs(tr, vehicle=veh, temperature_c=temp[logged],
-                             profile=list(modes[rl]), soc=s_log)
+                             profile=list(modes[rl]), soc=s_log, _fs_out=fs)
         soc0[logged] = s_log
         src = np.cumsum(logged)[trip[rl]] - 1  # position among logged trips
         capped_s[rl] = sl.regen_capped_h[src] * 3600.0
+        capped_fs[rl] = fs[0][src]
         for name in sums:
             sums[name][rl] = getattr(sl, name)[src]
         duration[rl] = sl.duration_h[src] * 3600.0
@@ -524,7 +569,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         if "grade_pct" in trips.columns:
             cols["grade_pct"] = trips["grade_pct"].to_numpy(float)[trip[~rl]]
         _synthetic_rows(cols, np.flatnonzero(~rl), veh, n_steps, seed, soc0[trip[~rl]],
-                        sums, duration, moving, vmax, capped_s)
+                        sums, duration, moving, vmax, (capped_s, capped_fs))
     parked = parked_seconds(trips)
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
@@ -532,15 +577,16 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                     moving_s=moving, parked_s=None if parked is None else parked[trip],
                     heating_grid_kw=heat_grid,
                     regen_cap_kw=_regen_threshold(veh, _profile_consts(list(modes), len(trip))[1],
-                                                  soc0[trip], len(trip))[0],
-                    capped_s=capped_s)
+                                                  len(trip))[0],
+                    capped_s=capped_s, capped_fs=capped_fs)
 
 
 def _synthetic_rows(cols, dest, veh, n_steps, seed, soc, sums, duration, moving, vmax,
-                    capped_s) -> None:
+                    capped) -> None:
     """Fill rows ``dest`` of the outputs from the synthetic traces of ``cols``.
 
-    ``soc`` (per row of ``cols``, NaN: unknown) derates the regen limit. The
+    ``soc`` (per row of ``cols``, NaN: unknown) derates the regen limit along
+    the trip; ``capped`` is the pair (capped time, derated capped time). The
     fused kernel (:mod:`hybridev.physics._kernel`) when numba is available,
     else the traces are built in blocks and summed by :func:`stats_from_traces`
     (the same numbers to rounding).
@@ -554,21 +600,26 @@ def _synthetic_rows(cols, dest, veh, n_steps, seed, soc, sums, duration, moving,
                 bad = float(x[~(np.isfinite(x) & (x > 0))][0])
                 raise ValueError(f"{name}={bad!r} is outside the allowed range (0, inf)")
         grade = np.arctan(cols["grade_pct"] / 100.0) if "grade_pct" in cols else 0.0
-        thr = _regen_threshold(veh, _profile_consts(cols["mode"], len(dest))[1], soc,
-                               len(dest))[1]
+        thr = _regen_threshold(veh, _profile_consts(cols["mode"], len(dest))[1], len(dest))[1]
+        d_m = cols["distance_km"] * 1000.0
+        derate = _derate(veh, soc, thr, d_m, d_m / (cols["avg_speed_kmh"] / 3.6))
         fused = synthetic_sums(cols["distance_km"], cols["avg_speed_kmh"], cols["mode"],
-                               cols["trip_id"], grade, n_steps, seed, veh, brake_limit_w=thr)
+                               cols["trip_id"], grade, n_steps, seed, veh, brake_limit_w=thr,
+                               derate=derate)
+    capped_s, capped_fs = capped
     if fused is not None:
-        sp, sn, duration[dest], moving[dest], vmax[dest], capped_s[dest] = fused
+        sp, sn, duration[dest], moving[dest], vmax[dest], capped_s[dest], capped_fs[dest] = fused
         for i, c in enumerate(_SUMS):
             sums[f"{c}_pos"][dest] = sp[i]
             sums[f"{c}_neg"][dest] = sn[i]
         return
     syn_modes = cols["mode"]  # object array (pandas would iterate a string column slowly)
     for blk, v, dt, grade in _blocks(pd.DataFrame(cols), n_steps, seed):
+        fs = []
         s = stats_from_traces(v, dt, vehicle=veh, profile=syn_modes[blk],
-                              grade_rad=grade, soc=soc[blk], _offset_grid=False)
+                              grade_rad=grade, soc=soc[blk], _offset_grid=False, _fs_out=fs)
         capped_s[dest[blk]] = s.regen_capped_h * 3600.0
+        capped_fs[dest[blk]] = fs[0]
         for name in sums:
             sums[name][dest[blk]] = getattr(s, name)
         duration[dest[blk]] = s.duration_h * 3600.0

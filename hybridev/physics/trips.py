@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from hybridev.physics.climate import hvac_power_kw
+from hybridev.physics.derate import derate_line, soc_drop_estimate
 from hybridev.physics.forces import (
     _battery_energy_kwh,
     _interval_grade,
@@ -230,14 +231,20 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     mult_eta = (prof["efficiency_multiplier"] * trac / veh.drivetrain_efficiency)[:, None]
     eta_r = (prof["regen_efficiency"] * regen)[:, None]
     aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
-    cap = np.broadcast_to(regen_limit_kw(veh, cols["soc_initial"]) * regen, (n,))[:, None]
+    cap = np.broadcast_to(regen_limit_kw(veh) * regen, (n,))[:, None]  # before the derating
+    derate = derate_line(veh, np.where(np.isfinite(cap[:, 0]), cols["soc_initial"], np.nan),
+                         soc_drop_estimate(veh, cols["distance_km"] * 1000.0,
+                                           cols["distance_km"] * 3600.0 / cols["avg_speed_kmh"]))
     warm = veh.climate_model == "continuous"
     parked = cols["parked_min"] * 60.0 if "parked_min" in cols else None
     for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
+        n_int = v.shape[1] - 1  # the limit derated along the trip's SoC (physics.derate)
+        f = np.clip(derate[0][sl, None] + derate[1][sl, None]
+                    * ((np.arange(n_int) + 0.5) / n_int), 0.0, 1.0)
         energy[sl] = _battery_energy_kwh(pw, dt[:, None], mult_eta[sl], eta_r[sl], aux[sl],
-                                         cap[sl])
+                                         np.where(np.isfinite(cap[sl]), cap[sl] * f, np.inf))
         if warm:
             energy[sl] += warmup_energy_kwh(temp[sl], dt * (v.shape[1] - 1), veh,
                                             parked_s=None if parked is None else parked[sl])

@@ -5,6 +5,7 @@ import pytest
 
 from hybridev.apps.drive import (
     LegPieces,
+    additive_leg_km,
     calibrated_pieces,
     drive_distribution,
     leg_correlation,
@@ -76,3 +77,26 @@ def test_leg_length_is_the_median_training_trip():
     assert leg_length_km(M(14.0)) == 14.0
     assert leg_length_km(M(None)) == pytest.approx(np.sqrt(80.0))
     assert leg_length_km(object()) == 50.0
+
+
+def test_legs_up_to_the_additive_length_are_additive_and_longer_ones_are_not():
+    """Per-km physics of a leg is the same at L / 2 and L = additive_leg_km, lower beyond.
+
+    The synthetic trace of a trip longer than ``n_steps / MIN_STEPS_PER_CYCLE`` cycles
+    gets longer cycles (fewer stops per km): a drive cut into such legs would depend on
+    the cut.
+    """
+    import pandas as pd
+
+    from hybridev import simulate
+
+    n_steps = 400
+    leg = float(additive_leg_km(40.0, "normal", n_steps))
+    assert leg == pytest.approx(40.0 * 50 * 45.0 / 3600.0)
+    d = np.array([0.5, 1.0, 3.0]) * leg
+    t = pd.DataFrame({"distance_km": np.repeat(d, 30), "avg_speed_kmh": 40.0, "mode": "normal",
+                      "temperature_c": 20.0, "soc_initial": 0.8, "trip_id": np.arange(90)})
+    per_km = (simulate(t, n_steps=n_steps, seed=0)["energy_kwh_physics"].to_numpy()
+              / t["distance_km"].to_numpy()).reshape(3, 30).mean(axis=1)
+    assert per_km[1] == pytest.approx(per_km[0], rel=0.02)
+    assert per_km[2] < per_km[1] * 0.95

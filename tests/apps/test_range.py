@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from hybridev import HybridModel, PhysicsFallbackWarning, VehicleParams, make_trips, simulate
-from hybridev.apps.drive import calibrated_pieces, drive_distribution
+from hybridev.apps.drive import additive_leg_km, calibrated_pieces, drive_distribution
 from hybridev.apps.range import predict_range, quantile_column
 from hybridev.apps.range_plot import FAN_QUANTILES, plot_soc_fan, soc_fan
 from hybridev.cli.main import main
@@ -84,10 +84,15 @@ def test_range_is_a_drive_of_legs(model, conditions):
     c, s0 = conditions
     c = c.assign(trip_id=np.arange(len(c)))
     out = predict_range(model, c, soc_initial=s0, soc_reserve=0.1)
-    leg = float(out["leg_km"].iloc[0])
-    assert leg == pytest.approx(model.mondrian_cut_km_)  # a familiar (median) trip length
+    leg = out["leg_km"].to_numpy()
+    # a familiar (median) trip length, shortened to where the trace keeps its drive cycle
+    steady = additive_leg_km(c["avg_speed_kmh"].to_numpy(), c["mode"].to_numpy(object), N_STEPS)
+    lo = model.fit_info_["distance_km_range"][0]
+    np.testing.assert_allclose(leg, np.maximum(np.minimum(model.mondrian_cut_km_, steady), lo))
+    assert (leg < model.mondrian_cut_km_).all()  # 200-step traces: every leg is shortened
     long = (out["range_km_q50"] > 1.2 * leg).to_numpy()
     assert long.sum() >= 10
+    leg = leg[long]
     soaked, warm = legs_at(c[long], s0[long], (s0[long] + 0.1) / 2, leg)
     n = int(long.sum())
     with warnings.catch_warnings():

@@ -24,7 +24,7 @@ def trips():
     t["grade_pct"] = np.random.default_rng(0).uniform(-6.0, 6.0, len(t))
     t.loc[t.index[:3], "distance_km"] = [0.4, 300.0, 2.0]  # one cycle; many; short
     t.loc[t.index[:3], "avg_speed_kmh"] = [8.0, 130.0, 15.0]
-    t.loc[t.index[3:6], "soc_initial"] = [1.0, np.nan, 0.97]  # no regen; unknown; derated
+    t.loc[t.index[3:6], "soc_initial"] = [1.0, np.nan, 0.97]  # derated from no regen; unknown; derated
     return t
 
 

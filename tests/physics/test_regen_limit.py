@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hybridev import VehicleParams, make_trips, simulate, trace_energy_kwh
+from hybridev.physics.derate import regen_derate_factor, soc_drop_estimate
 from hybridev.physics.forces import regen_limit_kw, trace_power_kw, wheel_power_kw
 from hybridev.physics.params import COMPACT_BEV_REGEN_MAX_KW
 from hybridev.physics.stats import energy_from_stats, term_energies
@@ -82,17 +83,36 @@ def test_steep_descent_costs_energy_with_a_limit():
     assert e_cap == pytest.approx(e_none - 20.0 * 600 / 3600, rel=1e-6)  # at the limit throughout
 
 
-def test_soc_derating():
+def test_soc_derating_follows_the_soc_along_the_trip():
     assert regen_limit_kw(CAR, [0.5, 0.9, 0.95, 1.0]).tolist() == pytest.approx(
         [20.0, 20.0, 10.0, 0.0])
     v, g = _traces(n=1)
-    full = trace_energy_kwh(v[0], 1.0, vehicle=CAR, grade_rad=g[0], soc=1.0)
+    e = {s: float(trace_energy_kwh(v[0], 1.0, vehicle=CAR, grade_rad=g[0], soc=s))
+         for s in (0.5, 0.9, 0.95, 1.0)}
     none = trace_energy_kwh(v[0], 1.0, vehicle=dataclasses.replace(CAR, regen_max_kw=1e-12),
                             grade_rad=g[0])
-    half = trace_energy_kwh(v[0], 1.0, vehicle=CAR, grade_rad=g[0], soc=0.5)
-    assert full == pytest.approx(none, abs=1e-9) and half < full
+    # a full pack regenerates less than a half-full one, but more than no regen at all:
+    # its SoC falls during the trip and the limit comes back
+    assert e[0.5] < e[0.95] < e[1.0] < none
+    assert e[0.9] == pytest.approx(e[0.5], rel=1e-12)  # below the threshold from the start
     with pytest.raises(ValueError, match="soc="):
         trace_energy_kwh(v[0], 1.0, vehicle=CAR, soc=1.5)
+
+
+def test_derated_limit_along_a_descent_is_linear_in_the_soc():
+    """15 % descent at 80 km/h from SoC 1: the recovered power is P_max f(x) interval by interval."""
+    v = np.full(1201, 80 / 3.6)
+    th = -np.arctan(0.15)
+    car = dataclasses.replace(CAR, battery_capacity_kwh=5.0)  # the SoC falls fast
+    p = trace_power_kw(v, 1.0, vehicle=car, grade_rad=th, soc=1.0)
+    aux_only = trace_power_kw(v, 1.0, vehicle=dataclasses.replace(car, regen_max_kw=1e-9),
+                              grade_rad=th)
+    drop = soc_drop_estimate(car, 80 / 3.6 * 1200, 1200.0)
+    x = (np.arange(1200) + 0.5) / 1200
+    f = np.clip(drop * x / (1.0 - car.regen_derate_soc), 0.0, 1.0)
+    assert 0.0 < f[0] < 0.5 and f[-1] == 1.0  # derated, then the full limit
+    assert np.allclose(aux_only - p, 20.0 * f, atol=1e-9)
+    assert np.allclose(regen_derate_factor(car, 1.0, drop, x), f)
 
 
 @pytest.mark.parametrize("per_sample_grade", [True, False])
@@ -130,8 +150,14 @@ def test_logged_statistics_exact_with_irregular_sampling():
         pw = np.array([wheel_power_kw(v_i[k:k + 2], dt[k], vehicle=CAR,
                                       grade_rad=g_i[k:k + 2])[0] for k in range(m - 1)])
         assert pw.min() < -20.0
+        # the SoC along the trip: interval k (one-interval trip) starts where the
+        # trip's linear SoC line puts its midpoint, less half its own drop
+        vm = 0.5 * (v_i[1:] + v_i[:-1])
+        trip_drop = soc_drop_estimate(CAR, float((vm * dt).sum()), t_i[-1] - t_i[0])
+        x = (0.5 * (t_i[1:] + t_i[:-1]) - t_i[0]) / (t_i[-1] - t_i[0])
+        s_k = soc[i] - trip_drop * x + 0.5 * soc_drop_estimate(CAR, vm * dt, dt)
         e = sum(float(trace_energy_kwh(v_i[k:k + 2], dt[k], vehicle=CAR, temperature_c=5.0,
-                                       grade_rad=g_i[k:k + 2], soc=soc[i]))
+                                       grade_rad=g_i[k:k + 2], soc=s_k[k]))
                 for k in range(m - 1))
         # the warm-up is per trip, not per interval: add it once, remove it m - 2 times
         single = float(trace_energy_kwh(v_i[:2] * 0, t_i[-1] - t_i[0], vehicle=CAR,

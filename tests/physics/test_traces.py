@@ -54,5 +54,10 @@ def test_hidden_braking_is_capped_like_the_visible_braking():
         a = stats_from_logs(tr, vehicle=car, temperature_c=20.0, soc=soc)
         b = stats_from_logs(none, vehicle=car, temperature_c=20.0, soc=soc)
         assert a.rest_pos[0] - b.rest_pos[0] == pytest.approx(hid_kwh, rel=1e-9)
-        assert b.rest_neg[0] - a.rest_neg[0] == pytest.approx(returned * hid_kwh, rel=1e-6)
+        # from a full pack the limit comes back only as the SoC falls along this 7-min trip
+        back = b.rest_neg[0] - a.rest_neg[0]
+        if returned:
+            assert back == pytest.approx(hid_kwh, rel=1e-6)
+        else:
+            assert 0.0 <= back < 0.1 * hid_kwh
         assert energy_from_stats(a)[0] > energy_from_stats(b)[0]

@@ -88,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
                           ("range_km_q90", "reached with probability 10 %")):
             print(f"  {col[len('range_km_'):]}  {out[col]:7.1f} km   ({note})")
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
-        print(f"  as a drive of legs of {out['leg_km']:.1f} km (the median training trip; "
+        print(f"  as a drive of legs of {out['leg_km']:.1f} km (the median training trip, "
+              "at most the length whose trace keeps its drive cycle; "
               "hybridev.apps.drive)")
     else:
         print(f"  physics model alone: {out['range_km_physics']:.1f} km")
