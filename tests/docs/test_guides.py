@@ -69,12 +69,16 @@ def fast(script: str) -> str:
     return script
 
 
-def run_page(script: str, workdir: Path, timeout: int = 1200) -> str:
+def run_page(script: str, workdir: Path, timeout: int = 1200, warm=None) -> str:
+    """Run ``script``; ``hybridev`` is a fresh interpreter per call, or ``warm``'s client."""
     bin_dir = workdir / "bin"
     bin_dir.mkdir()
-    shim = bin_dir / "hybridev"
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
-    shim.chmod(0o755)
+    if warm is None:
+        shim = bin_dir / "hybridev"
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
+        shim.chmod(0o755)
+    else:
+        warm.write_shim(bin_dir)
     tmp = workdir / "tmp"
     tmp.mkdir()
     env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
@@ -104,8 +108,8 @@ def test_page_script_groups_python_runs():
 
 
 @pytest.mark.parametrize("page", PAGES)
-def test_page_runs(page, tmp_path):
-    out = run_page(fast(page_script(page)), tmp_path)
+def test_page_runs(page, tmp_path, warm_cli):
+    out = run_page(fast(page_script(page)), tmp_path, warm=warm_cli)
     if page == "how-to/range.md":
         band = [float(v) for v in re.findall(r"q[159]0\s+([0-9.]+) km", out)]
         assert len(band) == 3 and band[0] <= band[1] <= band[2]

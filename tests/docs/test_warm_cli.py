@@ -1,0 +1,35 @@
+"""The warm ``hybridev`` of the docs tests behaves as the console command does."""
+
+import os
+import subprocess
+import sys
+
+
+def _run(bin_dir, args, cwd):
+    env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    return subprocess.run(["hybridev", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_exit_codes_streams_and_working_directory(warm_cli, tmp_path):
+    warm_cli.write_shim(tmp_path)
+    (tmp_path / "work").mkdir()
+    ok = _run(tmp_path, ["example-data", "ex"], tmp_path / "work")
+    assert ok.returncode == 0, ok.stderr
+    assert "wrote ex/schedule.csv" in ok.stdout
+    assert (tmp_path / "work" / "ex" / "tariff.csv").is_file()  # the caller's cwd
+    bad = _run(tmp_path, ["demo", "--seed", "-1", "--quiet", "--out", "r"], tmp_path / "work")
+    assert bad.returncode == 2
+    assert bad.stderr.strip().splitlines()[-1].startswith("hybridev demo: error:")
+    assert "--seed" in bad.stderr and bad.stdout == ""
+    assert not (tmp_path / "work" / "r").exists()
+
+
+def test_the_console_command_agrees(tmp_path):
+    """The same bad call through the real entry point: same exit code and message."""
+    res = subprocess.run([sys.executable, "-m", "hybridev.cli", "demo", "--seed", "-1",
+                          "--quiet", "--out", "r"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines()[-1].startswith("hybridev demo: error:")
+
