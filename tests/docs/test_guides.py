@@ -79,11 +79,12 @@ def run_page(script: str, workdir: Path, timeout: int = 1200, warm=None) -> str:
         shim.chmod(0o755)
     else:
         warm.write_shim(bin_dir)
+    python = sys.executable if warm is None else str(warm.write_python(bin_dir))
     tmp = workdir / "tmp"
     tmp.mkdir()
     env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-               HYBRIDEV_PYTHON=sys.executable, TMPDIR=str(tmp), MPLBACKEND="Agg")
+               HYBRIDEV_PYTHON=python, TMPDIR=str(tmp), MPLBACKEND="Agg")
     res = subprocess.run(["bash", "-c", script], cwd=tmp, env=env, capture_output=True,
                          text=True, timeout=timeout)
     assert res.returncode == 0, f"page failed:\n{script}\n{res.stdout}\n{res.stderr}"

@@ -33,3 +33,18 @@ def test_the_console_command_agrees(tmp_path):
     assert res.returncode == 2
     assert res.stderr.strip().splitlines()[-1].startswith("hybridev demo: error:")
 
+
+
+def test_python_on_stdin_runs_in_the_callers_folder_and_fails_like_python(warm_cli, tmp_path):
+    py = str(warm_cli.write_python(tmp_path))
+    prog = "from pathlib import Path\nPath('x.txt').write_text('hi')\nprint(__name__)\n"
+    ok = subprocess.run([py, "-"], input=prog, cwd=tmp_path, capture_output=True, text=True,
+                        timeout=300)
+    assert ok.returncode == 0 and ok.stdout == "__main__\n", ok.stderr
+    assert (tmp_path / "x.txt").read_text() == "hi"
+    bad = subprocess.run([py, "-"], input="import math\nmath.sqrt(-1)\n", cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 1 and "ValueError: math domain error" in bad.stderr
+    unbound = subprocess.run([py, "-"], input="print(HybridModel)\n", cwd=tmp_path,
+                             capture_output=True, text=True, timeout=300)
+    assert unbound.returncode == 1 and "NameError" in unbound.stderr  # imports must be written

@@ -10,7 +10,10 @@ for every call the server forks, and the child runs
 ``hybridev.cli.main(argv)`` with the caller's working directory, environment,
 stdin, stdout and stderr (the client's file descriptors, passed over a Unix
 socket), and the server hands the child's exit status back to the client, which
-exits with it. The scripts themselves run verbatim; only the interpreter's
+exits with it. A page's python blocks (``"$HYBRIDEV_PYTHON" -`` with the program
+on stdin) run the same way, with the program compiled and run as ``__main__`` in the
+forked child (its imports still have to be written: the server's modules are
+loaded, not in the program's namespace). The scripts themselves run verbatim; only the interpreter's
 start-up is shared. The slow tests (``test_page_runs_as_written``, the guide on
 the real trips) and ``tests/cli`` keep running the real console command in a
 fresh process.
@@ -83,9 +86,16 @@ def serve(sock_path: str) -> None:
             os.environ.clear()
             os.environ.update(request["env"])
             tempfile.tempdir = None  # TMPDIR is the caller's
-            sys.argv = ["hybridev", *request["argv"]]
             try:
-                rc = main(request["argv"])
+                if request.get("python"):  # ``python -``: the program is on stdin
+                    sys.argv = ["-"]
+                    sys.path[0] = ""
+                    code = compile(sys.stdin.read(), "<stdin>", "exec")
+                    exec(code, {"__name__": "__main__", "__builtins__": __builtins__})
+                    rc = 0
+                else:
+                    sys.argv = ["hybridev", *request["argv"]]
+                    rc = main(request["argv"])
             except SystemExit as exc:
                 rc = exc.code
             except BaseException:
@@ -110,11 +120,15 @@ def serve(sock_path: str) -> None:
     srv.close()
 
 
-def client_main(sock_path: str, argv: list[str]) -> int:
-    """Send ``argv``, the working directory, the environment and fds 0-2; return the exit code."""
+def client_main(sock_path: str, argv: list[str], python: bool = False) -> int:
+    """Send ``argv``, the working directory, the environment and fds 0-2; return the exit code.
+
+    ``python``: run the program on stdin (``python -``) instead of ``hybridev argv``.
+    """
     conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     conn.connect(sock_path)
-    msg = json.dumps({"argv": argv, "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
+    msg = json.dumps({"argv": argv, "cwd": os.getcwd(), "env": dict(os.environ),
+                      "python": python}).encode()
     socket.send_fds(conn, [msg], [0, 1, 2])
     conn.shutdown(socket.SHUT_WR)
     answer = _recv_all(conn)
@@ -142,6 +156,14 @@ class WarmCli:
                         f'"{self.sock}" "$@"\n')
         shim.chmod(0o755)
 
+    def write_python(self, bin_dir: Path) -> Path:
+        """``bin_dir/python-warm``: ``python -`` (a program on stdin) run by the server."""
+        shim = bin_dir / "python-warm"
+        shim.write_text(f'#!/bin/sh\n[ "$#" = 1 ] && [ "$1" = - ] || exec "{sys.executable}" "$@"\n'
+                        f'exec "{sys.executable}" -S -E "{__file__}" python "{self.sock}"\n')
+        shim.chmod(0o755)
+        return shim
+
     def close(self) -> None:
         if self.proc.poll() is None:
             conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -161,4 +183,4 @@ if __name__ == "__main__":
     if sys.argv[1] == "serve":
         serve(sys.argv[2])
     else:
-        sys.exit(client_main(sys.argv[2], sys.argv[3:]))
+        sys.exit(client_main(sys.argv[2], sys.argv[3:], python=sys.argv[1] == "python"))
