@@ -12,6 +12,11 @@ here (they create environments and download packages).
   which changes the numbers, not the commands; every substitution must match.
 * Slow: the pages exactly as written, and the fleet page (a dask cluster).
 
+``hybridev`` and the python blocks run in one warm server per test process
+(``warm_cli.py``: forked per call, no re-import of torch); the console command in a
+fresh interpreter is tested by ``tests/cli`` (every command's exit codes) and by the
+own-car guide on the real trips.
+
 ``docs/own_car.md`` has its own test (``test_own_car_guide.py``: real trips).
 """
 
@@ -132,5 +137,5 @@ def test_slow_page_runs(page, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES)
-def test_page_runs_as_written(page, tmp_path):
-    run_page(page_script(page), tmp_path)
+def test_page_runs_as_written(page, tmp_path, warm_cli):
+    run_page(page_script(page), tmp_path, warm=warm_cli)

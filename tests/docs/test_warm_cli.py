@@ -2,7 +2,6 @@
 
 import os
 import subprocess
-import sys
 
 
 def _run(bin_dir, args, cwd):
@@ -23,16 +22,6 @@ def test_exit_codes_streams_and_working_directory(warm_cli, tmp_path):
     assert bad.stderr.strip().splitlines()[-1].startswith("hybridev demo: error:")
     assert "--seed" in bad.stderr and bad.stdout == ""
     assert not (tmp_path / "work" / "r").exists()
-
-
-def test_the_console_command_agrees(tmp_path):
-    """The same bad call through the real entry point: same exit code and message."""
-    res = subprocess.run([sys.executable, "-m", "hybridev.cli", "demo", "--seed", "-1",
-                          "--quiet", "--out", "r"], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=300)
-    assert res.returncode == 2
-    assert res.stderr.strip().splitlines()[-1].startswith("hybridev demo: error:")
-
 
 
 def test_python_on_stdin_runs_in_the_callers_folder_and_fails_like_python(warm_cli, tmp_path):
