@@ -103,7 +103,7 @@ def report(runs: list[dict], parallel: bool, nice: int) -> str:
              f"Written by `python benchmarks/{Path(__file__).name}` on "
              f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC"
              f"{' (--parallel: both suites at once)' if parallel else ''}"
-             f"{f', niced by {nice}' if nice else ''}. CPU time = user + system time of the "
+             f", at niceness {os.nice(0) + nice}. CPU time = user + system time of the "
              "pytest process and of every process it waited for (xdist workers, CLI and "
              "kernel subprocesses, dask workers), from `os.wait4`; the wall time depends on "
              "the machine's load, given beside it.", "",
@@ -140,8 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--suite", choices=["both", *SUITES], default="both")
     p.add_argument("--parallel", action="store_true", help="run the two suites at once")
     p.add_argument("--nice", type=int, default=0, help="run the suites at this niceness")
-    p.add_argument("--out", type=Path, default=OUT, help="result file (markdown)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="result file (markdown; default results/bench_test_suite.md, "
+                        "or bench_test_suite_<suite>.md for one suite)")
     args = p.parse_args(argv)
+    if args.out is None:
+        args.out = OUT if args.suite == "both" else OUT.with_name(f"{OUT.stem}_{args.suite}.md")
     names = list(SUITES) if args.suite == "both" else [args.suite]
     with tempfile.TemporaryDirectory() as tmp:
         logs = {n: Path(tmp) / f"{n}.jsonl" for n in names}
