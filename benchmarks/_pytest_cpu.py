@@ -5,8 +5,12 @@ Load it with ``-p _pytest_cpu`` (``benchmarks/`` on ``PYTHONPATH``) and set
 worker) appends one JSON line per test, ``{"nodeid", "cpu_s", "wall_s"}``, where
 ``cpu_s`` is user + system time of the process and of the children it waited for
 during the test (setup, call and teardown), so a test that runs the CLI in a
-subprocess is charged for it. A session-scoped fixture is charged to the first
-test that uses it.
+subprocess is charged for it. A session-scoped fixture's set-up is charged to the
+first test that uses it, and its teardown to the last test of that process: a
+child process is counted when it is waited for, so the warm CLI server of the
+docs tests (whose forked children run the pages' commands) and a dask cluster's
+workers appear under whichever test ends the session (often a doctest). The
+suite's total (``bench_test_suite.py``) counts everything once.
 """
 
 from __future__ import annotations
