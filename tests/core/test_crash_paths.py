@@ -5,10 +5,17 @@ As in :mod:`tests.core.test_crash`: an old output is written, a run that would
 write a different new output is killed at a named step (``HYBRIDEV_FAULT``),
 and the path must then hold the complete old or the complete new output; the
 next run writes the new output and leaves nothing else beside it.
+
+The old output and the reference new output of each writer are written once per
+module by real runs (:func:`_made`); each case starts from a copy of the old
+output's folder (the same bytes: ownership and manifests are by content and
+relative name), so a case costs two fresh processes, the killed run and the next one.
 """
 
 import hashlib
+import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -87,22 +94,39 @@ def _complete(path: Path) -> bool:
         hashlib.sha256((path / k).read_bytes()).hexdigest() == files[k] for k in listed)
 
 
-def _case(write, target: Path, step: str, sig: str, expected: set[str],
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """Folder of the once-written old and reference outputs, by writer."""
+    return tmp_path_factory.mktemp("made")
+
+
+def _made(write, made: Path, key: str, name: str):
+    """``(folder holding the old output, new snapshot)`` of writer ``key``, written once."""
+    home = made / key
+    if not home.exists():
+        work = made / f".{key}"
+        (work / "ref").mkdir(parents=True)
+        (work / "old").mkdir()
+        r = write("2", work / "ref" / name, None)
+        assert r.returncode == 0, r.stderr
+        (work / "new.json").write_text(json.dumps(snapshot(work / "ref" / name)))
+        r = write("1", work / "old" / name, None)
+        assert r.returncode == 0, r.stderr
+        work.rename(home)
+    return home / "old", json.loads((home / "new.json").read_text())
+
+
+def _case(write, target: Path, step: str, sig: str, expected: set[str], made: Path, key: str,
           deterministic: bool = True):
     """``write(version, path, fault)`` -> CompletedProcess.
 
     ``deterministic=False`` (a report, which records its own run time): the new output of
     two runs differs, so "the complete new output" is a folder other than the old one
     that its manifest describes completely."""
-    ref = target.parent.parent / "ref" / target.name
-    ref.parent.mkdir(parents=True, exist_ok=True)
-    r = write("2", ref, None)
-    assert r.returncode == 0, r.stderr
-    new = snapshot(ref)
-    r = write("1", target, None)
-    assert r.returncode == 0, r.stderr
+    old_dir, new = _made(write, made, key, target.name)
+    shutil.copytree(old_dir, target.parent, symlinks=True)  # the old output, as written
     old = snapshot(target)
-    assert old != new
+    assert old is not None and old != new
     r = write("2", target, f"{step}:{sig}")
     assert r.returncode != 0, (step, sig, r.stdout, r.stderr)
     assert "Traceback" not in r.stderr or (sig == "SIGINT" and "KeyboardInterrupt" in r.stderr)
@@ -119,39 +143,39 @@ def _case(write, target: Path, step: str, sig: str, expected: set[str],
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_model_folder(files, tmp_path, step, sig):
+def test_model_folder(files, made, tmp_path, step, sig):
     def write(v, path, fault):
         code = ("import sys; from hybridev import HybridModel; "
                 "HybridModel.load(sys.argv[1]).save(sys.argv[2])")
         return _py(["-c", code, str(files / f"model{v}"), str(path)], fault)
 
-    _case(write, tmp_path / "out" / "m", step, sig, {"m"})
+    _case(write, tmp_path / "out" / "m", step, sig, {"m"}, made, "model")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["file"])
-def test_prediction_file(files, tmp_path, step, sig):
+def test_prediction_file(files, made, tmp_path, step, sig):
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"),
                     str(files / f"trips{v}.csv"), "--out", str(path)], fault)
 
-    _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE})
+    _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE}, made, "pred")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_fleet_folder(files, tmp_path, step, sig):
+def test_fleet_folder(files, made, tmp_path, step, sig):
     pytest.importorskip("dask.distributed")
 
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
                     "--out", str(path), "--workers", "1"], fault)
 
-    _case(write, tmp_path / "out" / "preds", step, sig, {"preds"})
+    _case(write, tmp_path / "out" / "preds", step, sig, {"preds"}, made, "fleet")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_report_folder(files, tmp_path, sig):
+def test_report_folder(files, made, tmp_path, sig):
     def write(v, path, fault):
         meas = pd.read_csv(files / "measured.csv")
         src = tmp_path / f"measured{v}.csv"
@@ -159,7 +183,8 @@ def test_report_folder(files, tmp_path, sig):
         return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
                     "--members", "1", "--max-epochs", "3", "--quiet"], fault)
 
-    _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"}, deterministic=False)
+    _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"}, made, "report",
+          deterministic=False)
 
 
 def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):

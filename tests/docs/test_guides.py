@@ -12,6 +12,11 @@ here (they create environments and download packages).
   which changes the numbers, not the commands; every substitution must match.
 * Slow: the pages exactly as written, and the fleet page (a dask cluster).
 
+``hybridev`` and the python blocks run in one warm server per test process
+(``warm_cli.py``: forked per call, no re-import of torch); the console command in a
+fresh interpreter is tested by ``tests/cli`` (every command's exit codes) and by the
+own-car guide on the real trips.
+
 ``docs/own_car.md`` has its own test (``test_own_car_guide.py``: real trips).
 """
 
@@ -69,17 +74,22 @@ def fast(script: str) -> str:
     return script
 
 
-def run_page(script: str, workdir: Path, timeout: int = 1200) -> str:
+def run_page(script: str, workdir: Path, timeout: int = 1200, warm=None) -> str:
+    """Run ``script``; ``hybridev`` is a fresh interpreter per call, or ``warm``'s client."""
     bin_dir = workdir / "bin"
     bin_dir.mkdir()
-    shim = bin_dir / "hybridev"
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
-    shim.chmod(0o755)
+    if warm is None:
+        shim = bin_dir / "hybridev"
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
+        shim.chmod(0o755)
+    else:
+        warm.write_shim(bin_dir)
+    python = sys.executable if warm is None else str(warm.write_python(bin_dir))
     tmp = workdir / "tmp"
     tmp.mkdir()
     env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-               HYBRIDEV_PYTHON=sys.executable, TMPDIR=str(tmp), MPLBACKEND="Agg")
+               HYBRIDEV_PYTHON=python, TMPDIR=str(tmp), MPLBACKEND="Agg")
     res = subprocess.run(["bash", "-c", script], cwd=tmp, env=env, capture_output=True,
                          text=True, timeout=timeout)
     assert res.returncode == 0, f"page failed:\n{script}\n{res.stdout}\n{res.stderr}"
@@ -104,8 +114,8 @@ def test_page_script_groups_python_runs():
 
 
 @pytest.mark.parametrize("page", PAGES)
-def test_page_runs(page, tmp_path):
-    out = run_page(fast(page_script(page)), tmp_path)
+def test_page_runs(page, tmp_path, warm_cli):
+    out = run_page(fast(page_script(page)), tmp_path, warm=warm_cli)
     if page == "how-to/range.md":
         band = [float(v) for v in re.findall(r"q[159]0\s+([0-9.]+) km", out)]
         assert len(band) == 3 and band[0] <= band[1] <= band[2]
@@ -127,5 +137,5 @@ def test_slow_page_runs(page, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES)
-def test_page_runs_as_written(page, tmp_path):
-    run_page(page_script(page), tmp_path)
+def test_page_runs_as_written(page, tmp_path, warm_cli):
+    run_page(page_script(page), tmp_path, warm=warm_cli)

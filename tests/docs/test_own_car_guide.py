@@ -7,7 +7,8 @@ Every ```bash block of the guide is run, in order, as one bash script with
   when present: slow, skipped otherwise;
 * on a small synthetic logger with the M1 logger's column names and no SoC,
   in the default suite, with fewer epochs and members (``--max-epochs 15
-  --members 2`` appended to ``fit`` and ``calibrate``).
+  --members 2`` appended to ``fit`` and ``calibrate``), and ``hybridev`` served
+  by one warm process (``warm_cli.py``) rather than a fresh interpreter per call.
 
 The guide works in a folder of its own (``cd "$(mktemp -d)"``): both runs check
 that the folder it was started from stays empty, and the outputs the guide promises: a saved model, predictions with
@@ -38,13 +39,20 @@ def guide_script() -> str:
     return "set -euo pipefail\n" + "\n".join(blocks)
 
 
-def run_guide(workdir: Path, data: Path, script: str) -> tuple[Path, str]:
-    """Run the guide with ``TMPDIR`` in ``workdir``; returns the folder it worked in."""
+def run_guide(workdir: Path, data: Path, script: str, warm=None) -> tuple[Path, str]:
+    """Run the guide with ``TMPDIR`` in ``workdir``; returns the folder it worked in.
+
+    ``hybridev`` is a fresh interpreter per call, or the client of the warm server
+    ``warm`` (``warm_cli.py``: the same commands without re-importing torch each time).
+    """
     bin_dir = workdir / "bin"
     bin_dir.mkdir()
-    shim = bin_dir / "hybridev"
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
-    shim.chmod(0o755)
+    if warm is None:
+        shim = bin_dir / "hybridev"
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
+        shim.chmod(0o755)
+    else:
+        warm.write_shim(bin_dir)
     env = dict(os.environ, DATA=str(data), PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
                MPLBACKEND="Agg", TMPDIR=str(workdir / "tmp"))
@@ -112,12 +120,12 @@ def test_guide_is_linked_from_readme_and_site():
     assert "own_car.md" in (ROOT / "mkdocs.yml").read_text()
 
 
-def test_guide_on_synthetic_logger(tmp_path):
+def test_guide_on_synthetic_logger(tmp_path, warm_cli):
     synthetic_logger(tmp_path / "logger", N_LOGGER_TRIPS)
     script = re.sub(r"^(hybridev (?:fit|calibrate) .*)$", r"\1 --max-epochs 15 --members 2",
                     guide_script(), flags=re.M)
     assert script.count("--max-epochs 15") == 2
-    work, out = run_guide(tmp_path, tmp_path / "logger", script)
+    work, out = run_guide(tmp_path, tmp_path / "logger", script, warm=warm_cli)
     check_outputs(work, out, N_LOGGER_TRIPS)
 
 
