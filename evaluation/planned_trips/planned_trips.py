@@ -14,9 +14,10 @@ defaults fitted with the logged traces and the date groups. Each fold's held-out
 trips are predicted
 
 * **planned**: from the summary alone (distance, mean speed, temperature, start
-  time and the net grade ``100 * elev_net_m / (1000 * distance_km)`` as
-  ``grade_pct``), no trace: the planned-trip mode of
-  :mod:`hybridev.learning.planned`;
+  time, the net grade ``100 * elev_net_m / (1000 * distance_km)`` as
+  ``grade_pct`` and the logged climb and descent ``elev_gain_m``, ``elev_loss_m`` as
+  ``elevation_gain_m``, ``elevation_loss_m``, the same the summary linear regression
+  uses), no trace: the planned-trip mode of :mod:`hybridev.learning.planned`;
 * **traced**: with their logged traces.
 
 Reported per mode (pooled over folds): 90 % coverage, MAPE, mean width over the
@@ -149,7 +150,9 @@ def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
         y = m.trips["energy_kwh"].to_numpy(float)[te]
         traced = model.predict_interval(x, LEVEL, timeseries=m.traces.select(
             x["trip_id"].to_numpy()))
-        planned = model.predict_interval(x.assign(grade_pct=grade[te]), LEVEL)
+        planned = model.predict_interval(x.assign(
+            grade_pct=grade[te], elevation_gain_m=extra["elev_gain_m"].to_numpy(float)[te],
+            elevation_loss_m=extra["elev_loss_m"].to_numpy(float)[te]), LEVEL)
     rate = model.gap_rate_
     return {"fold": k, "n_train": len(tr), "n_test": len(te),
             # the calibration of planned trips given a grade (as here), when the model has it
