@@ -14,6 +14,9 @@ its own scores, learned at fit on the training trips themselves:
 * **split fits**: the held-out calibration trips are predicted without their
   traces by the final model.
 
+Before scoring, each summary-only prediction is scaled by the learned trace gap
+(:mod:`hybridev.learning.trace_gap`, ``trace_gap_``: how this car's logged traces
+differ in physics from synthesised ones, by mean speed and climb/descent).
 A synthesised trace is smoother than how a given car is driven, so summary-only
 predictions may be biased by conditions: a multiplicative correction
 ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` km/h, ``T`` °C) is ridge-fitted to the
