@@ -129,3 +129,50 @@ def test_planned_trips_of_a_stop_and_go_driver_are_closer_with_the_trace_gap(tmp
     np.testing.assert_array_equal(back.planned_.trace_gap_.coef_, gap.coef_)
     old = {k: v for k, v in m.planned_.to_arrays().items() if "trace_gap" not in k}
     assert PlannedTripCalibrator.from_arrays(old).trace_gap_ is None
+
+
+def _hilly(n: int, seed: int) -> tuple[pd.DataFrame, pd.DataFrame, np.ndarray]:
+    """Trips over hills (climb as much as descend, net 0) of random height, their 1 Hz
+    traces with the grade, and each trip's climb and descent (n, 2), m."""
+    rng = np.random.default_rng(seed)
+    t = make_trips(n, seed=seed).drop(columns=["mode"])
+    t["temperature_c"] = rng.uniform(10.0, 25.0, n).round(1)
+    t["distance_km"] = rng.uniform(5.0, 25.0, n)
+    t["avg_speed_kmh"] = rng.uniform(30.0, 70.0, n)
+    hill = rng.uniform(0.0, 6.0, n)  # grade amplitude, %: flat to hilly
+    rows, energy, climb = [], np.empty(n), np.empty((n, 2))
+    for i, r in enumerate(t.itertuples()):
+        dur = round(r.distance_km / r.avg_speed_kmh * 3600)
+        s = np.arange(dur + 1, dtype=float)
+        v = r.avg_speed_kmh * (1.0 + 0.3 * np.sin(2 * np.pi * s / 60.0 + i))
+        v *= r.avg_speed_kmh / v.mean()
+        g = hill[i] * np.sin(2 * np.pi * s / 300.0)  # %: up and down, net about 0
+        rows.append(pd.DataFrame({"trip_id": r.trip_id, "t_s": s, "speed_kmh": v,
+                                  "grade_pct": g}))
+        energy[i] = float(trace_energy_kwh(v / 3.6, 1.0, vehicle=CAR,
+                                           temperature_c=r.temperature_c,
+                                           grade_rad=np.arctan(g / 100.0)))
+    t["energy_kwh"] = energy * (1.0 + 0.02 * rng.standard_normal(n))
+    ts = pd.concat(rows, ignore_index=True)
+    climb = logged_elevation_m(t, as_traces(ts))
+    return t, ts, climb
+
+
+def test_planned_trips_given_climb_and_descent_pay_the_hills():
+    """On a hilly synthetic truth (net grade 0, hills of random height), planned trips
+    given their climb and descent are closer than the same trips without them."""
+    train, ts, _ = _hilly(60, 5)
+    test, _, climb = _hilly(120, 6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = HybridModel(vehicle=CAR, n_steps=100, max_epochs=40, n_members=2,
+                        calibrate_physics=False).fit(train, seed=0, timeseries=ts)
+    assert m.planned_.graded_.trace_gap_.coef_elev_ is not None
+    x, y = test.drop(columns=["energy_kwh"]).assign(grade_pct=0.0), test["energy_kwh"].to_numpy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        given = m.predict(x.assign(elevation_gain_m=climb[:, 0], elevation_loss_m=climb[:, 1]))
+        plain = m.predict(x)
+    mape = [float(np.mean(np.abs(p["energy_kwh_pred"].to_numpy() / y - 1)))
+            for p in (given, plain)]
+    assert mape[0] < 0.9 * mape[1], mape  # without the climb terms: equal
