@@ -251,7 +251,9 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
 
         def calibrator(trips, elevation=None):
             mu, sd = scored(trips)
-            gap, factor = fit_trace_gap(model, trips, traces, elevation, fold if cv else None)
+            # the trace gap never sees the measured energy: the scores use the final one
+            gap = fit_trace_gap(model, trips, traces, elevation)
+            factor = gap.factor(trips["avg_speed_kmh"].to_numpy(float), elevation)
             return PlannedTripCalibrator().fit(
                 e_meas[idx], mu * factor[idx], np.maximum(sd * factor[idx], 1e-12), g_plan,
                 conditions=conditions_of(trips.iloc[idx]), fold=fold[idx] if cv else None,

@@ -3,11 +3,9 @@
 A planned trip (no logged trace) runs the physics on a synthesised trace built
 from its mean speed (and net grade). The synthesised trace is not how this car
 is driven: its stop density and speed variation, and the climbs and descents
-of the roads, are not those of the logged trips. On M1
-(``evaluation/planned_trips``) the ratio of a training trip's physics energy on
-its logged trace to the same physics on its synthesised trace explains most of
-the summary-only error (planned predictions scaled by each held-out trip's own
-ratio come within a few tenths of a percent of the traced MAPE).
+of the roads, are not those of the logged trips. The ratio of a training trip's
+physics energy on its logged trace to the same physics on its synthesised trace
+is what its summary-only prediction misses against its traced one.
 
 :class:`TraceGap` learns that ratio from the summaries at fit time:
 ``ln(E_phys(logged trace) / E_phys(synthesised trace))`` is ridge-regressed on
@@ -27,7 +25,10 @@ training log-ratios' range: it does not extrapolate.
 
 Its factor scales the summary-only predictive distribution of a planned trip
 (:class:`~hybridev.learning.planned.PlannedTripCalibrator`, before the
-calibrator's own correction and scores, which are computed with it).
+calibrator's own correction and scores). The scored training trips get the factor
+of the very regression the planned trips get (fitted on all training trips, their
+own included: it never sees their measured energy), so the scores measure the
+error of the prediction as the model makes it.
 """
 
 from __future__ import annotations
@@ -163,29 +164,18 @@ class TraceGap:
         return out
 
 
-def fit_trace_gap(model, trips: pd.DataFrame, traces, elevation=None, fold=None
-                  ) -> tuple[TraceGap, np.ndarray]:
-    """:class:`TraceGap` of ``trips`` (all with a logged trace) and its cross-fitted
-    factors (n,) (each trip's from the other ``fold`` s; default 5 blocks).
+def fit_trace_gap(model, trips: pd.DataFrame, traces, elevation=None) -> TraceGap:
+    """:class:`TraceGap` of ``trips`` (all with a logged trace) under a fitted ``model``.
 
-    The physics energies are the fitted model's posterior median on the logged
-    traces and on the synthesised ones of the same summaries (``trips`` as a planned
-    trip would give them: with ``grade_pct`` when the planned trips have it).
+    The physics energies are the model's posterior median on the logged traces and on
+    the synthesised ones of the same summaries (``trips`` as a planned trip would give
+    them: with ``grade_pct`` when the planned trips have it). ``elevation``: climb and
+    descent per km (n, 2), m/km, or None.
     """
     phys = model.physics_
     e_syn = np.asarray(phys.columns(trips)[1]["energy_kwh_physics"], float)
     e_log = np.asarray(phys.columns(trips, traces=traces)[1]["energy_kwh_physics"], float)
-    v = trips["avg_speed_kmh"].to_numpy(float)
-    n = len(trips)
-    fold = np.arange(n) * 5 // max(n, 1) if fold is None else np.asarray(fold, int)
-    factor = np.ones(n)
-    for f in np.unique(fold):
-        rest = fold != f
-        if rest.sum() >= 10:
-            e = None if elevation is None else elevation[rest]
-            g = TraceGap().fit(v[rest], e_log[rest], e_syn[rest], e)
-            factor[~rest] = g.factor(v[~rest], None if elevation is None else elevation[~rest])
-    return TraceGap().fit(v, e_log, e_syn, elevation), factor
+    return TraceGap().fit(trips["avg_speed_kmh"].to_numpy(float), e_log, e_syn, elevation)
 
 
 def logged_elevation_m(trips: pd.DataFrame, traces) -> np.ndarray | None:
