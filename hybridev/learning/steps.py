@@ -28,7 +28,8 @@ __all__ = ["ARRAY_COLUMNS", "CalibratedInterval", "DomainAssessment", "PhysicsDr
            "RawPrediction", "table_columns"]
 
 ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",
-                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics")
+                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics",
+                 "elevation_gain_m", "elevation_loss_m")
 """Float columns of a physics table that the point prediction reads."""
 
 
