@@ -227,7 +227,8 @@ class PhysicsStage:
             if stats.marginalised:
                 starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
                 vmax = np.maximum.reduceat(vmax, starts)
-            out = PhysicsDraws(table=valid, energies=[e for e, _ in pairs],
+            out = PhysicsDraws(table=valid, columns=table_columns(valid),
+                               energies=[e for e, _ in pairs],
                                plain=[p for _, p in pairs], n_draws=int(n_draws),
                                max_speed_kmh=vmax,
                                capacity_kwh=self.vehicle().battery_capacity_kwh)
@@ -236,7 +237,8 @@ class PhysicsStage:
             out = PhysicsDraws(table=table, columns=cols, append=append,
                                energies=[None] * len(physics), plain=[None] * len(physics))
         if modes:
-            no_mode = out.table["mode"].isna().to_numpy()
+            no_mode = pd.isna(out.columns["mode"] if "mode" in out.columns
+                              else out.table["mode"].to_numpy(object))
             if no_mode.any():
                 sub = out.table.loc[no_mode, [c for c in out.table.columns
                                               if c not in _PHYSICS_COLUMNS]]
