@@ -34,7 +34,7 @@ from hybridev.bayes.heater import HeaterSelection, select_heater_kind
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.learning.features import MODE_NAMES, normalize_modes, physics_modes
-from hybridev.learning.inputs import validate_prediction_trips
+from hybridev.learning.inputs import validate_prediction_columns, validate_prediction_trips
 from hybridev.learning.residual import residual_scale
 from hybridev.learning.steps import ARRAY_COLUMNS, PhysicsDraws, table_columns
 from hybridev.physics.params import VehicleParams
@@ -220,14 +220,14 @@ class PhysicsStage:
         if not isinstance(trips, pd.DataFrame):
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if self.posterior_ is not None:
-            valid = validate_prediction_trips(trips)
+            valid, cols = validate_prediction_columns(trips)
             stats = self.stats(valid, traces)
             pairs = [self._energies(stats, n_draws, seed, p) for p in physics]
             vmax = stats.max_speed_kmh
             if stats.marginalised:
                 starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
                 vmax = np.maximum.reduceat(vmax, starts)
-            out = PhysicsDraws(table=valid, columns=table_columns(valid),
+            out = PhysicsDraws(table=valid, columns=cols,
                                energies=[e for e, _ in pairs],
                                plain=[p for _, p in pairs], n_draws=int(n_draws),
                                max_speed_kmh=vmax,
