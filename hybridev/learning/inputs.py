@@ -61,7 +61,8 @@ def validate_prediction_columns(trips: pd.DataFrame
     cols = {c: arrays[c] if c in arrays else good[c].to_numpy(float)
             for c in ARRAY_COLUMNS if c in present}
     cols["mode"] = modes
-    return good.assign(mode=modes), cols
+    good["mode"] = modes  # good is the validation's own (shallow, copy-on-write) copy
+    return good, cols
 
 
 def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = False,
