@@ -198,7 +198,7 @@ class DomainAssessment:
     interp_gap: np.ndarray | None = None
 
 
-@dataclass
+@dataclass(init=False)
 class RawPrediction:
     """The uncalibrated prediction of a batch of trips.
 
@@ -243,6 +243,16 @@ class RawPrediction:
     excess_var: np.ndarray | None = None
     physics: dict = field(default_factory=dict)
     columns: dict | None = None
+
+    def __init__(self, table=None, dist=None, folds=None, mode_means=None, mean=None,
+                 std=None, fold_means=None, fold_stds=None, var_draws=None, excess_var=None,
+                 physics=None, columns=None, *, base=None) -> None:
+        # ``table`` (the physics table, as before) or ``base`` with ``physics`` to append
+        self.base = table if base is None else base
+        self.dist, self.folds, self.mode_means = dist, list(folds or []), mode_means
+        self.mean, self.std, self.fold_means, self.fold_stds = mean, std, fold_means, fold_stds
+        self.var_draws, self.excess_var = var_draws, excess_var
+        self.physics, self.columns = dict(physics or {}), columns
 
     @functools.cached_property
     def table(self) -> pd.DataFrame:
