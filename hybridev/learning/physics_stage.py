@@ -52,6 +52,15 @@ _PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
                     "kwh_per_km_physics")
 
 
+def _sample_median(post: PhysicsPosterior) -> np.ndarray:
+    """``np.median(post.samples, axis=0)`` (as :meth:`PhysicsPosterior.median`), computed
+    once per posterior and cached on it (keyed on its samples: new samples, new median)."""
+    cached = post.__dict__.get("_sample_median")
+    if cached is None or cached[0] is not post.samples:
+        cached = post._sample_median = (post.samples, np.median(post.samples, axis=0))
+    return cached[1]
+
+
 class PhysicsStage:
     """Vehicle physics, with a posterior over its parameters and a discrepancy stage.
 
@@ -183,7 +192,7 @@ class PhysicsStage:
         """Energies ``(1 + n_draws, n_trips)`` with the discrepancy at full weight, and a
         callable giving them without it (None without a discrepancy)."""
         post, disc = physics or (self.posterior_, self.discrepancy_)
-        med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
+        med = _sample_median(post)
         rng = np.random.default_rng(seed)
         draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
         params = post.as_params(np.vstack([med, draws]))
