@@ -76,7 +76,13 @@ import pandas as pd
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import raw_prediction
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
-from hybridev.learning.trace_gap import TraceGap, conditions_of, elevation_of, net_grade_pct
+from hybridev.learning.trace_gap import (
+    TraceGap,
+    conditions_of,
+    elevation_of,
+    net_grade_pct,
+    ridge_fit,
+)
 
 __all__ = ["PlannedTripCalibrator", "conditions_of", "net_grade_pct"]
 
@@ -388,7 +394,6 @@ class PlannedTripCalibrator:
 
 
 _CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
-_RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
 _MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
 
 
@@ -408,12 +413,6 @@ def _design(conditions: np.ndarray) -> np.ndarray:
 
 
 def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Ridge coefficients of ``target`` on :func:`_design`, slopes shrunk by :data:`_RIDGE`."""
-    x = _design(conditions)
-    mu, sd = x[:, 1:].mean(axis=0), x[:, 1:].std(axis=0)
-    sd = np.where(sd > 1e-9, sd, 1.0)
-    z = (x[:, 1:] - mu) / sd
-    t0 = float(np.mean(target))
-    b = np.linalg.solve(z.T @ z + _RIDGE * np.eye(z.shape[1]), z.T @ (target - t0))
-    slopes = b / sd
-    return np.r_[t0 - mu @ slopes, slopes]
+    """Ridge coefficients of ``target`` on :func:`_design` (:func:`~hybridev.learning.
+    trace_gap.ridge_fit`)."""
+    return ridge_fit(_design(conditions), target)

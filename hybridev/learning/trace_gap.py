@@ -38,8 +38,8 @@ import dataclasses
 import numpy as np
 import pandas as pd
 
-__all__ = ["ELEVATION_COLUMNS", "TraceGap", "conditions_of", "elevation_of", "fit_trace_gap",
-           "logged_elevation_m", "net_grade_pct"]
+__all__ = ["ELEVATION_COLUMNS", "TraceGap", "conditions_of", "elevation_of",
+           "fit_trace_gap", "logged_elevation_m", "net_grade_pct", "ridge_fit"]
 
 ELEVATION_COLUMNS = ("elevation_gain_m", "elevation_loss_m")
 """Optional planned-trip inputs: total climb and total descent over the trip, m (>= 0)."""
@@ -56,8 +56,10 @@ def _design(speed_kmh, elevation=None) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def _ridge(x: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Ridge coefficients of ``target`` on ``x`` (first column the intercept, unpenalised)."""
+def ridge_fit(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Ridge coefficients of ``target`` (n,) on the design ``x`` (n, 1 + k): the first
+    column the intercept (unpenalised), the ``k`` slopes shrunk by :data:`_RIDGE` in
+    standardised units; shape (1 + k,)."""
     mu, sd = x[:, 1:].mean(axis=0), x[:, 1:].std(axis=0)
     sd = np.where(sd > 1e-9, sd, 1.0)
     z = (x[:, 1:] - mu) / sd
@@ -112,14 +114,14 @@ class TraceGap:
                    / np.maximum(np.asarray(e_synth_kwh, float), 1e-9))
         ok = np.isfinite(r) & np.isfinite(v)
         v, r = v[ok], r[ok]
-        self.coef_ = _ridge(_design(v), r)
+        self.coef_ = ridge_fit(_design(v), r)
         self.coef_elev_ = None
         self.range_ = np.full((2, 3), np.nan)
         self.range_[:, 0] = v.min(), v.max()
         if elevation is not None:
             e = np.asarray(elevation, float)[ok]
             if np.all(np.isfinite(e)) and len(e) >= 10:
-                self.coef_elev_ = _ridge(_design(v, e), r)
+                self.coef_elev_ = ridge_fit(_design(v, e), r)
                 self.range_[:, 1:] = e.min(axis=0), e.max(axis=0)
         self.log_range_ = np.array([r.min(), r.max()])
         return self
