@@ -121,7 +121,11 @@ def headline() -> dict:
                    and r["plan"] == "risk-neutral" and r["risk target"] == 0.05)
     rb = _md_row(EVAL / "range_bands" / "range_bands.md", "inside the training conditions")
     rbx = _md_row(EVAL / "range_bands" / "range_bands.md", "between the training conditions")
+    pt = json.loads((EVAL / "planned_trips" / "planned_trips.json").read_text())["rows"]["all"]
+    planned = {"mape": pt["planned"]["mape_pct"], "coverage": pt["planned"]["coverage"],
+               "linreg": pt["linreg_summary"]["mape_pct"]}
     return {"n_trips": rw["n_trips"], "n_days": rw["n_days"], "n_folds": rw["n_folds"],
+            "planned": planned,
             "mape": mape, "coverage": cov, "risk": risk, "risk_neutral": neutral["truth"],
             "replicates": risk.get("n", neutral["n"]), "range_inside": rb[2],
             "range_n": rb[1], "range_between": rbx[2], "range_between_n": rbx[1]}

@@ -14,9 +14,13 @@ defaults fitted with the logged traces and the date groups. Each fold's held-out
 trips are predicted
 
 * **planned**: from the summary alone (distance, mean speed, temperature, start
-  time and the net grade ``100 * elev_net_m / (1000 * distance_km)`` as
-  ``grade_pct``), no trace: the planned-trip mode of
-  :mod:`hybridev.learning.planned`;
+  time, the net grade ``100 * elev_net_m / (1000 * distance_km)`` as
+  ``grade_pct`` and the climb and descent over the trip's logged trace as
+  ``elevation_gain_m``, ``elevation_loss_m``
+  (:func:`hybridev.learning.trace_gap.logged_elevation_m`, as the fit scores its
+  training trips; the summary linear regression uses the source's ``elev_gain_m``,
+  ``elev_loss_m``, smaller than these but closely correlated with them), no
+  trace: the planned-trip mode of :mod:`hybridev.learning.planned`;
 * **traced**: with their logged traces.
 
 Reported per mode (pooled over folds): 90 % coverage, MAPE, mean width over the
@@ -57,6 +61,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baseline_conformal import conformal_baseline
 
 from hybridev import HybridModel
+from hybridev.learning.trace_gap import logged_elevation_m
 from hybridev.physics.stats_build import trip_stats
 
 HERE = Path(__file__).resolve().parent
@@ -140,7 +145,8 @@ def _baselines(m, extra, tr, te, vehicle, heater_kind, date) -> tuple[dict, dict
     return points, intervals
 
 
-def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
+def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray, climb: np.ndarray
+          ) -> dict:
     fit_on = ssd._subset(m, np.isin(np.arange(len(m.trips)), tr))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -149,7 +155,9 @@ def _fold(m, date, extra, vehicle, tr, te, k, *, grade: np.ndarray) -> dict:
         y = m.trips["energy_kwh"].to_numpy(float)[te]
         traced = model.predict_interval(x, LEVEL, timeseries=m.traces.select(
             x["trip_id"].to_numpy()))
-        planned = model.predict_interval(x.assign(grade_pct=grade[te]), LEVEL)
+        planned = model.predict_interval(x.assign(
+            grade_pct=grade[te], elevation_gain_m=climb[te, 0], elevation_loss_m=climb[te, 1]),
+            LEVEL)
     rate = model.gap_rate_
     return {"fold": k, "n_train": len(tr), "n_test": len(te),
             # the calibration of planned trips given a grade (as here), when the model has it
@@ -180,16 +188,18 @@ def run(root: Path) -> dict:
     extra = _summary(root, m.trips["trip_id"].to_numpy())
     grade = 100.0 * extra["elev_net_m"].to_numpy(float) / (
         1000.0 * m.trips["distance_km"].to_numpy(float))
+    climb = logged_elevation_m(m.trips, m.traces)  # (n, 2) m, as the fit scores its trips
     n = len(m.trips)
     res = {"all": [], "small": []}
     for k, (tr, te) in enumerate(GroupKFold(N_FOLDS).split(np.zeros(n), groups=date)):
-        res["all"].append(_fold(m, date, extra, vehicle, tr, te, k, grade=grade))
+        res["all"].append(_fold(m, date, extra, vehicle, tr, te, k, grade=grade,
+                                 climb=climb))
         print({key: v for key, v in res["all"][-1].items() if not isinstance(v, dict)},
               flush=True)
         days = np.random.default_rng(k).permutation(np.unique(date[tr]))
         order = np.concatenate([tr[date[tr] == d] for d in days])
         res["small"].append(_fold(m, date, extra, vehicle, np.sort(order[:SMALL]), te, k,
-                                  grade=grade))
+                                  grade=grade, climb=climb))
     return res
 
 

@@ -50,6 +50,7 @@ posterior) stay physical.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -185,10 +186,27 @@ class TermDiscrepancy:
         rng = np.random.default_rng(rng)
         out = np.tile(self.weights, (int(n), 1))
         if self.active.any() and n:
-            cov = 0.5 * (self.cov + self.cov.T)
-            out[:, self.active] += rng.multivariate_normal(
-                np.zeros(len(cov)), cov, size=int(n), method="eigh")
+            # rng.multivariate_normal(0, cov, n, method="eigh"), bit for bit, with the
+            # factor of the covariance computed once (learned state, not per call)
+            z = rng.standard_normal((int(n), int(self.active.sum())))
+            out[:, self.active] += 0.0 + z @ self._factor().T
         return np.clip(out, 0.0, self.upper)
+
+    def _factor(self) -> np.ndarray:
+        """``u sqrt|s|`` of the eigen-decomposition of the symmetrised covariance, as
+        ``Generator.multivariate_normal(method="eigh")`` builds it; cached (a new fit
+        is a new instance; the cache is keyed on ``cov`` should it be reassigned)."""
+        cached = self.__dict__.get("_factor_cache")
+        if cached is not None and cached[0] is self.cov:
+            if cached[2]:
+                warnings.warn("covariance is not symmetric positive-semidefinite.",
+                              RuntimeWarning, stacklevel=3)
+            return cached[1]
+        cov = 0.5 * (self.cov + self.cov.T)
+        s, u = np.linalg.eigh(cov)
+        bad = bool(np.any(s < -1e-8))  # numpy's check (tol=1e-8), warned on every draw
+        self._factor_cache = (self.cov, u * np.sqrt(np.abs(s)), bad)
+        return self._factor()
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays for a saved model (see :meth:`from_arrays`)."""

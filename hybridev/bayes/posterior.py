@@ -20,7 +20,7 @@ from hybridev.physics.params import PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import STAT_PARAMS, PhysicsStats, row_energy
 from hybridev.physics.stats_build import trip_stats
 
-__all__ = ["MIN_CHAIN_TAU", "PhysicsPosterior", "vehicle_with"]
+__all__ = ["MIN_CHAIN_TAU", "PhysicsPosterior", "burn_and_thin", "vehicle_with"]
 
 MIN_CHAIN_TAU = 50.0
 """Chains shorter than this many autocorrelation times (after burn-in) warn."""
@@ -76,6 +76,30 @@ def _vehicle_to_dict(v: VehicleParams) -> dict:
 def _vehicle_from_dict(d: dict) -> VehicleParams:
     return VehicleParams(**{**d, "hvac_kw": tuple(d["hvac_kw"])})
 
+
+def burn_and_thin(tau, n_steps: int) -> tuple[float, int, int]:
+    """``(tau_max, burn, thin)`` of an emcee run from its autocorrelation times.
+
+    Burn-in ``min(ceil(3 tau_max), n_steps // 2)``, thinning ``max(1, tau_min / 2)``.
+    A coordinate whose autocorrelation time emcee cannot estimate (NaN: met in a
+    short warm-started CV+ fold run on 20 real trips) is left out instead of stopping
+    the fit. With none finite the run counts as unconverged: ``tau_max = n_steps``
+    (burn half, no thinning; the short-chain warning follows).
+
+    Parameters
+    ----------
+    tau : array_like, shape (n_dim,)
+        ``sampler.get_autocorr_time(tol=0)``, steps.
+    n_steps : int
+        Steps of the run.
+    """
+    tau = np.asarray(tau, dtype=float)
+    finite = tau[np.isfinite(tau)]
+    if not finite.size:
+        return float(max(n_steps, 1)), n_steps // 2, 1
+    tau_max = float(np.max(finite))
+    return (tau_max, min(math.ceil(3.0 * tau_max), n_steps // 2),
+            max(1, int(0.5 * float(np.min(finite)))))
 
 class PhysicsPosterior:
     """Posterior draws of physics parameters and the relative noise.
@@ -180,9 +204,7 @@ class PhysicsPosterior:
         """
         n_steps = int(sampler.iteration)
         tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
-        tau_max = float(np.max(tau))
-        burn = min(math.ceil(3.0 * tau_max), n_steps // 2)
-        thin = max(1, int(0.5 * float(np.min(tau))))
+        tau_max, burn, thin = burn_and_thin(tau, n_steps)
         chain = sampler.get_chain(discard=burn, thin=thin, flat=True)
         acc = np.asarray(sampler.acceptance_fraction, dtype=float)
         length_tau = (n_steps - burn) / tau_max
@@ -198,7 +220,8 @@ class PhysicsPosterior:
         diag = {
             "n_walkers": int(sampler.nwalkers), "n_steps": n_steps, "burn_in": burn,
             "thin": thin, "n_samples": len(chain),
-            "tau": {n: float(t) for n, t in zip(labels, tau, strict=True)},
+            "tau": {n: float(t) if math.isfinite(t) else None  # JSON: no NaN
+                    for n, t in zip(labels, tau, strict=True)},
             "tau_max": tau_max, "chain_length_tau": float(length_tau),
             "acceptance_mean": float(acc.mean()), "acceptance_min": float(acc.min()),
             "converged": bool(length_tau >= MIN_CHAIN_TAU), "elapsed_s": float(elapsed_s),

@@ -207,9 +207,9 @@ class TrainingDomain:
         """
         return _intensive_max(self.gaps(table, traces))
 
-    def _gaps(self, q: np.ndarray, *, interior: bool = False) -> np.ndarray:
+    def _gaps(self, q: np.ndarray, *, interior: bool = False, both: bool = False):
         """:meth:`gaps` of the domain quantities ``q`` (n_trips, 5); ``interior``:
-        :meth:`interior_gap` instead."""
+        :meth:`interior_gap` instead; ``both``: ``(gaps, interior_gap)``, in one pass."""
         out, inner = np.empty_like(q), np.zeros(len(q))
         for j, (vals, tol) in enumerate(zip(self.values, DOMAIN_TOLERANCES, strict=True)):
             i = np.searchsorted(vals, q[:, j])
@@ -221,7 +221,7 @@ class TrainingDomain:
                 inner = np.maximum(inner, np.where(outside > 0, 0.0, near))
                 near = 0.0
             out[:, j] = np.where(outside > 0, outside / (EDGE_FRACTION * tol), near)
-        return inner if interior else out
+        return (out, inner) if both else inner if interior else out
 
     def interior_gap(self, q: np.ndarray) -> np.ndarray:
         """Largest interpolation gap over the intensive quantities, (n_trips,), of the
@@ -301,7 +301,7 @@ class TrainingDomain:
         else:
             q, has_trace = domain_quantities(table, traces)
             mode = table["mode"].to_numpy(dtype=object) if "mode" in table.columns else None
-        g = self._gaps(q) if n else np.zeros((0, len(DOMAIN_QUANTITIES)))
+        g, inner = self._gaps(q, both=True)  # and the interior gap, in the same pass
         gap = _intensive_max(g)  # intensive conditions only (the module docstring)
         no_mode = ((pd.isna(mode) if mode is not None else np.ones(n, dtype=bool))
                    if self.needs_mode else np.zeros(n, dtype=bool))
@@ -320,7 +320,7 @@ class TrainingDomain:
                 warn_out_of_domain(int((~ok).sum()), n, reasons=reasons, stacklevel=stacklevel)
         out = DomainAssessment(score=score, in_domain=ok, gap=gap, no_trace=no_trace,
                                no_mode=no_mode, reasons=reasons, has_trace=has_trace,
-                               interp_gap=self.interior_gap(q) if n else np.zeros(0))
+                               interp_gap=inner)
         if reasons:  # some trip is out: the gap and inflation of its out-of-domain spread
             out.ood_gap = np.where(no_trace, np.maximum(gap, MISSING_INPUT_SCORE), gap)
             out.inflation = self.inflation(out.ood_gap)

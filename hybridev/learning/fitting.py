@@ -41,6 +41,7 @@ from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GapRate, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
+from hybridev.learning.trace_gap import fit_trace_gap, logged_elevation_m
 
 __all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
            "fit_physics", "fit_planned", "fit_summary", "split_trips"]
@@ -260,19 +261,25 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                 dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
                 return dist.mean(), dist.std()
 
-        def calibrator(trips):
+        def calibrator(trips, elevation=None):
             mu, sd = scored(trips)
+            # the trace gap never sees the measured energy: the scores use the final one
+            gap = fit_trace_gap(model, trips, traces, elevation)
+            factor = gap.factor(trips["avg_speed_kmh"].to_numpy(float), elevation)
             return PlannedTripCalibrator().fit(
-                e_meas[idx], mu, np.maximum(sd, 1e-12), g_plan,
+                e_meas[idx], mu * factor[idx], np.maximum(sd * factor[idx], 1e-12), g_plan,
                 conditions=conditions_of(trips.iloc[idx]),
-                fold=fold[idx] if len(cv) > 1 else None)  # one fold: blocks, as split
+                fold=fold[idx] if len(cv) > 1 else None,  # one fold: blocks, as split
+                trace_gap=gap)
 
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))
         planned = calibrator(good)
         grade = None if "grade_pct" in good.columns else net_grade_pct(good, traces)
         if grade is not None:  # planned trips given a grade: scored with the logged one
-            planned.graded_ = calibrator(good.assign(grade_pct=grade))
+            elev = logged_elevation_m(good, traces)  # climb, descent per km: as planned
+            planned.graded_ = calibrator(good.assign(grade_pct=grade), None if elev is None
+                                         else elev / good["distance_km"].to_numpy(float)[:, None])
         domain = dataclasses.replace(domain, needs_trace=False)
         scores.append(planned.residuals_)
         gaps.append(g_plan)

@@ -13,11 +13,13 @@ import pandas as pd
 from hybridev.learning.features import (
     normalize_modes,
 )
+from hybridev.learning.steps import ARRAY_COLUMNS
 from hybridev.physics.params import VehicleParams
-from hybridev.physics.validation import TRIP_RULES, check_table
+from hybridev.physics.validation import TRIP_RULES, _check_table
 
 __all__ = ["check_calibration_level", "check_level", "check_read_vehicle",
-           "min_calibration_trips", "unpack_trips", "validate_prediction_trips"]
+           "min_calibration_trips", "unpack_trips", "validate_prediction_columns",
+           "validate_prediction_trips"]
 
 
 _TRIP_REQUIRED = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial")
@@ -35,9 +37,32 @@ def validate_prediction_trips(trips: pd.DataFrame) -> pd.DataFrame:
     >>> validate_prediction_trips(t)["mode"].tolist()
     [None]
     """
-    good, _ = check_table(trips, required=_TRIP_REQUIRED, rules=TRIP_RULES,
-                          mode_required=False, what="trips")
-    return good.assign(mode=normalize_modes(good.get("mode"), len(good)))
+    return validate_prediction_columns(trips)[0]
+
+
+def validate_prediction_columns(trips: pd.DataFrame
+                                ) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+    """:func:`validate_prediction_trips`, and the validated table's columns as arrays.
+
+    Returns
+    -------
+    valid : pandas.DataFrame
+        As :func:`validate_prediction_trips`.
+    columns : dict of str to numpy.ndarray, each (n_trips,)
+        The :data:`~hybridev.learning.steps.ARRAY_COLUMNS` of ``valid`` present (float)
+        and ``mode`` (object, ``None`` where unknown), as
+        :func:`~hybridev.learning.steps.table_columns` reads them, but from the
+        validation's own arrays (each column is looked up once: slow on small tables).
+    """
+    good, _, arrays = _check_table(trips, required=_TRIP_REQUIRED, rules=TRIP_RULES,
+                                   mode_required=False, what="trips")
+    modes = normalize_modes(arrays.get("mode"), len(good))  # raise mode: good's own cells
+    present = set(good.columns)
+    cols = {c: arrays[c] if c in arrays else good[c].to_numpy(float)
+            for c in ARRAY_COLUMNS if c in present}
+    cols["mode"] = modes
+    good["mode"] = modes  # good is the validation's own (shallow, copy-on-write) copy
+    return good, cols
 
 
 def _check_range(name: str, value, lo: float, hi: float, *, integer: bool = False,

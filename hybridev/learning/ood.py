@@ -115,13 +115,15 @@ class OutOfDomainSpread:
         with neither ``max(sd^2 - var_draws, 0)``, which loses digits when the draws
         dominate). ``mode_means``: for the trips lacking a trained-with mode, their point
         energies under the three modes (3, n_no_mode), or a callable giving them from
-        those trips' table.
+        those trips' table. ``table``: the physics table, or (with ``mode_means`` an
+        array) its columns as arrays by name.
         """
         if assessment is None or assessment.in_domain.all():
             return sd
         a = assessment
         gap = a.ood_gap
-        e_p = table["energy_kwh_physics"].to_numpy(float)
+        e_p = table["energy_kwh_physics"]  # a table's column, or an array (raw.columns)
+        e_p = e_p if isinstance(e_p, np.ndarray) else e_p.to_numpy(float)
         # the posterior draws' spread as it is; the rest (noise, network) inflated
         if excess_var is None:
             excess_var = (dist.excess_var() if dist is not None
@@ -161,7 +163,9 @@ class OutOfDomainSpread:
             if self.trace_gap_rel > 0:
                 other = other | np.asarray(assessment.no_trace, bool)
             ok = ok | ~other
-        return ok, self.sd(assessment, raw.table, raw.mean, raw.std, raw.var_draws,
+        cols = raw.columns  # the columns as arrays: the table is built once, at the output
+        table = cols if cols is not None and not callable(raw.mode_means) else raw.table
+        return ok, self.sd(assessment, table, raw.mean, raw.std, raw.var_draws,
                            excess_var=raw.excess_var, mode_means=raw.mode_means)
 
     def widen(self, assessment: DomainAssessment | None, raw: RawPrediction,

@@ -180,7 +180,8 @@ def point_columns(columns: dict, energy_kwh: np.ndarray, vehicle: VehicleParams,
 
 def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
                      in_domain: np.ndarray, domain_score: np.ndarray,
-                     vehicle: VehicleParams, *, residual: bool = True) -> pd.DataFrame:
+                     vehicle: VehicleParams, *, residual: bool = True, physics=None,
+                     columns=None) -> pd.DataFrame:
     """``table`` with the point, interval, SoC, domain and confidence columns (a new table).
 
     ``interval``: a :class:`~hybridev.learning.steps.CalibratedInterval` (after the
@@ -189,21 +190,33 @@ def interval_columns(table: pd.DataFrame, interval, confidence: np.ndarray,
     (so every SoC interval holds it). A trip whose upper energy may empty the battery
     (``hi >= s0 C``) gets the one-sided SoC interval ``[0, s0 - lo_one / C]``.
     ``confidence_rel`` is ``confidence`` over ``max(|E|, 0.05 kWh/km d)``.
+
+    ``physics``: physics columns (arrays) still to append to ``table`` (ahead of the
+    others, in one step); ``columns``: the physics table's columns as arrays
+    (:meth:`~hybridev.learning.steps.PhysicsDraws.entry_columns`; None: read from
+    ``table``).
     """
-    e_p = table["energy_kwh_physics"].to_numpy(float)
-    d_km = table["distance_km"].to_numpy(float)
+    physics = physics or {}
+    if columns is None:
+        columns = {c: table[c].to_numpy(float) for c in
+                   ("energy_kwh_physics", "distance_km", "avg_speed_kmh", "soc_initial",
+                    "grade_pct") if c in table and c not in physics}
+        columns.update(physics)
+    e_p = np.asarray(columns["energy_kwh_physics"], float)
+    d_km = columns["distance_km"]
     fl = np.minimum(e_p, 0.0) if residual else np.zeros_like(e_p)
-    grade = table["grade_pct"].fillna(0.0).to_numpy(float) if "grade_pct" in table else 0.0
-    fl = np.maximum(fl, _energy_floor(d_km, table["avg_speed_kmh"].to_numpy(float), grade,
+    grade = (np.where(np.isnan(columns["grade_pct"]), 0.0, columns["grade_pct"])
+             if "grade_pct" in columns else 0.0)  # as fillna(0.0)
+    fl = np.maximum(fl, _energy_floor(d_km, columns["avg_speed_kmh"], grade,
                                       vehicle))  # energy_floor_kwh, each column read once
     point = np.maximum(interval.mean, fl)
     lo, hi, lo_one = (np.maximum(a, fl) for a in (interval.lo, interval.hi, interval.lo_one))
     lo_one = np.minimum(lo_one, point)  # the SoC interval always holds the point prediction
     cap = vehicle.battery_capacity_kwh
-    s0 = table["soc_initial"].to_numpy(float)
+    s0 = columns["soc_initial"]
     may_empty = hi >= s0 * cap
     scale = np.maximum(np.abs(point), 0.05 * d_km)
-    return append_columns(table, {  # one concat: column inserts dominate on small tables
+    return append_columns(table, {**physics,  # one concat: inserts dominate on small tables
         "energy_kwh_pred": point, "energy_kwh_lo": lo, "energy_kwh_hi": hi,
         "soc_final_pred": soc_from_energy(s0, point, cap),
         "soc_final_lo": np.where(may_empty, 0.0, soc_from_energy(s0, hi, cap)),

@@ -34,7 +34,7 @@ from hybridev.bayes.heater import HeaterSelection, select_heater_kind
 from hybridev.bayes.posterior import PhysicsPosterior
 from hybridev.bayes.sampler import calibrate_physics
 from hybridev.learning.features import MODE_NAMES, normalize_modes, physics_modes
-from hybridev.learning.inputs import validate_prediction_trips
+from hybridev.learning.inputs import validate_prediction_columns, validate_prediction_trips
 from hybridev.learning.residual import residual_scale
 from hybridev.learning.steps import ARRAY_COLUMNS, PhysicsDraws, table_columns
 from hybridev.physics.params import VehicleParams
@@ -50,6 +50,15 @@ KEEP_POSTERIOR_DRAWS = 500
 
 _PHYSICS_COLUMNS = ("energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
                     "kwh_per_km_physics")
+
+
+def _sample_median(post: PhysicsPosterior) -> np.ndarray:
+    """``np.median(post.samples, axis=0)`` (as :meth:`PhysicsPosterior.median`), computed
+    once per posterior and cached on it (keyed on its samples: new samples, new median)."""
+    cached = post.__dict__.get("_sample_median")
+    if cached is None or cached[0] is not post.samples:
+        cached = post._sample_median = (post.samples, np.median(post.samples, axis=0))
+    return cached[1]
 
 
 class PhysicsStage:
@@ -183,7 +192,7 @@ class PhysicsStage:
         """Energies ``(1 + n_draws, n_trips)`` with the discrepancy at full weight, and a
         callable giving them without it (None without a discrepancy)."""
         post, disc = physics or (self.posterior_, self.discrepancy_)
-        med = np.median(post.samples, axis=0)  # as PhysicsPosterior.median()
+        med = _sample_median(post)
         rng = np.random.default_rng(seed)
         draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
         params = post.as_params(np.vstack([med, draws]))
@@ -220,14 +229,15 @@ class PhysicsStage:
         if not isinstance(trips, pd.DataFrame):
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if self.posterior_ is not None:
-            valid = validate_prediction_trips(trips)
+            valid, cols = validate_prediction_columns(trips)
             stats = self.stats(valid, traces)
             pairs = [self._energies(stats, n_draws, seed, p) for p in physics]
             vmax = stats.max_speed_kmh
             if stats.marginalised:
                 starts = np.flatnonzero(np.r_[True, stats.trip[1:] != stats.trip[:-1]])
                 vmax = np.maximum.reduceat(vmax, starts)
-            out = PhysicsDraws(table=valid, energies=[e for e, _ in pairs],
+            out = PhysicsDraws(table=valid, columns=cols,
+                               energies=[e for e, _ in pairs],
                                plain=[p for _, p in pairs], n_draws=int(n_draws),
                                max_speed_kmh=vmax,
                                capacity_kwh=self.vehicle().battery_capacity_kwh)
@@ -236,7 +246,8 @@ class PhysicsStage:
             out = PhysicsDraws(table=table, columns=cols, append=append,
                                energies=[None] * len(physics), plain=[None] * len(physics))
         if modes:
-            no_mode = out.table["mode"].isna().to_numpy()
+            no_mode = pd.isna(out.columns["mode"] if "mode" in out.columns
+                              else out.table["mode"].to_numpy(object))
             if no_mode.any():
                 sub = out.table.loc[no_mode, [c for c in out.table.columns
                                               if c not in _PHYSICS_COLUMNS]]

@@ -158,16 +158,16 @@ def _raw(parts: _Parts, trips: pd.DataFrame, traces=None, *, seed: int = 0, nets
                             physics=unique, modes=modes)
     fade = stage.discrepancy_ is not None and dom is not None
     assessment = (None if dom is None  # 2 domain
-                  else dom.assess(draws.table, traces, fade=fade, warn=warn, stacklevel=6))
+                  else dom.assess(draws.table, traces, columns=draws.columns or None,
+                                  fade=fade, warn=warn, stacklevel=6))
     draws = draws.faded(assessment.fade if fade else None,
                         assessment.mode_fade if fade else None)
-    physics_draws = [draws.draws(e) for e in range(len(draws.tables))]
-    moments = learner.predict_moments(draws.tables, index, list(nets),  # 3 residual
+    entries = [draws.entry_columns(e) for e in range(len(draws.energies))]  # as arrays
+    moments = learner.predict_moments(entries, index, list(nets),  # 3 residual
                                       parts.distance_range, dom)
-    mode_means = (np.stack([learner.point(draws.modes[m].tables[0], dom) for m in MODE_NAMES])
-                  if draws.modes else None)
-    dists = [build_distribution(physics_draws[e],  # 4 distribution
-                                draws.tables[e]["energy_kwh_physics"].to_numpy(float),
+    mode_means = (np.stack([learner.point(draws.modes[m].entry_columns(), dom)
+                            for m in MODE_NAMES]) if draws.modes else None)
+    dists = [build_distribution(draws.draws(e), entries[e]["energy_kwh_physics"],  # 4
                                 mean, var, residual=learner.residual)
              for (mean, var), e in zip(moments, index, strict=True)]
     return dists, draws, assessment, mode_means
@@ -224,7 +224,9 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
     dists, draws, assessment, mode_means = _raw(  # steps 1-4
         parts, trips, traces, seed=seed, nets=(None, *nets), physics=(None, *physics),
         modes=True, warn=True)
-    raw = raw_prediction(draws.tables[0], dists, mode_means)
+    table, physics = draws.output_parts()  # the output table is built once, in step 7
+    raw = raw_prediction(table, dists, mode_means, physics=physics,
+                         columns=draws.entry_columns())
     planned = _planned_rows(parts, assessment)  # trips without a logged trace
     if kind == "distribution":
         factor = parts.calibrator.spread_factor(level)  # 5 calibrator
@@ -240,8 +242,9 @@ def predictive_path(model, trips: pd.DataFrame, traces=None, *, kind: str = "poi
         raw, calibrated = parts.planned.calibrate(raw, calibrated, level, planned)
     wide, confidence = parts.ood().widen(assessment, raw, calibrated, level)  # 6 out-of-domain
     score = np.zeros(len(ok)) if assessment is None else assessment.score
-    return interval_columns(raw.table, wide, confidence, ok, score, parts.vehicle,  # 7 output
-                            residual=parts.learner.residual)
+    return interval_columns(raw.base, wide, confidence, ok, score, parts.vehicle,  # 7 output
+                            residual=parts.learner.residual, physics=raw.physics,
+                            columns=raw.columns)
 
 
 def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
@@ -252,9 +255,9 @@ def _point(parts: _Parts, trips: pd.DataFrame, traces=None) -> pd.DataFrame:
     if dom is not None:  # 2 domain
         assessment = dom.assess(draws.table, traces, columns=draws.columns or None,
                                 fade=stage.discrepancy_ is not None, warn=True, stacklevel=6)
-    append = draws.append
     if draws.posterior:  # the table waits for the discrepancy's fade
         draws = draws.faded(None if assessment is None else assessment.fade)
+    append = draws.append  # the physics columns, appended with the others in one step
     cols = draws.point_columns()
     e_phys = cols["energy_kwh_physics"]
     if learner is not None:

@@ -14,6 +14,9 @@ its own scores, learned at fit on the training trips themselves:
 * **split fits**: the held-out calibration trips are predicted without their
   traces by the final model.
 
+Before scoring, each summary-only prediction is scaled by the learned trace gap
+(:mod:`hybridev.learning.trace_gap`, ``trace_gap_``: how this car's logged traces
+differ in physics from synthesised ones, by mean speed and climb/descent).
 A synthesised trace is smoother than how a given car is driven, so summary-only
 predictions may be biased by conditions: a multiplicative correction
 ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` km/h, ``T`` °C) is ridge-fitted to the
@@ -73,6 +76,13 @@ import pandas as pd
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import raw_prediction
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
+from hybridev.learning.trace_gap import (
+    TraceGap,
+    conditions_of,
+    elevation_of,
+    net_grade_pct,
+    ridge_fit,
+)
 
 __all__ = ["PlannedTripCalibrator", "conditions_of", "net_grade_pct"]
 
@@ -96,6 +106,10 @@ class PlannedTripCalibrator:
         (``grade_pct``): it serves the planned trips given a ``grade_pct``, this one
         those without (None: this one serves both; older files, or traces without
         elevation).
+    trace_gap_ : TraceGap or None
+        The learned ratio of logged- to synthesised-trace physics
+        (:mod:`hybridev.learning.trace_gap`) that scales a planned trip's mean and
+        spread before the correction and the scores (None: older files).
     excess_rel_ : float
         Relative spread ``c`` of the summary-only errors beyond the model's own
         spread (dimensionless, >= 0; 0 in files saved before it existed): the scores
@@ -113,7 +127,7 @@ class PlannedTripCalibrator:
 
     MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
 
-    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None
+    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None
             ) -> PlannedTripCalibrator:
         """Scores (and the mean correction) from measured energies and summary-only predictions.
 
@@ -130,9 +144,12 @@ class PlannedTripCalibrator:
         fold : array_like of int, shape (n,), optional
             Folds of the cross-fitting of the correction (default: 5 blocks of
             consecutive trips).
+        trace_gap : TraceGap, optional
+            Kept as ``trace_gap_`` (``mean`` and ``std`` already carry its factor).
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
         self.graded_ = None  # set by the fit (hybridev.learning.fitting.fit_planned)
+        self.trace_gap_ = trace_gap
         self.coef_ = np.zeros(len(_CORRECTION_TERMS))
         self.conditions_range_ = np.array([[0.0, -273.15], [np.inf, np.inf]])
         if conditions is not None:
@@ -211,8 +228,15 @@ class PlannedTripCalibrator:
     def _factor(self, table: pd.DataFrame, rows: np.ndarray) -> np.ndarray:
         """Mean correction per trip (n_trips,): :meth:`correction` on ``rows``, 1 elsewhere."""
         f = np.ones(len(table))
-        f[rows] = self.correction(conditions_of(table.iloc[np.flatnonzero(rows)]))
+        sub = table.iloc[np.flatnonzero(rows)]
+        f[rows] = self.correction(conditions_of(sub)) * self._gap(
+            sub["avg_speed_kmh"].to_numpy(float), elevation_of(sub))
         return f
+
+    def _gap(self, speed_kmh: np.ndarray, elevation) -> np.ndarray:
+        """The :class:`~hybridev.learning.trace_gap.TraceGap` factor (1 without one)."""
+        gap = getattr(self, "trace_gap_", None)
+        return np.ones(len(speed_kmh)) if gap is None else gap.factor(speed_kmh, elevation)
 
     def _parts(self, grade, rows: np.ndarray) -> list:
         """``[(calibrator, rows), ...]``: the trips given a grade (finite ``grade_pct``,
@@ -237,7 +261,10 @@ class PlannedTripCalibrator:
     def _correct_point(self, energy: np.ndarray, columns: dict, rows: np.ndarray) -> np.ndarray:
         cond = np.column_stack([columns["avg_speed_kmh"], columns["temperature_c"]])[rows]
         out = np.array(energy, float, copy=True)
-        out[rows] = out[rows] * self.correction(cond)
+        elev = (np.column_stack([columns[c] for c in ("elevation_gain_m", "elevation_loss_m")])
+                [rows] / np.maximum(columns["distance_km"][rows, None], 1e-9)
+                if "elevation_gain_m" in columns and "elevation_loss_m" in columns else None)
+        out[rows] = out[rows] * self.correction(cond) * self._gap(cond[:, 0], elev)
         return out
 
     def correct(self, raw: RawPrediction, rows: np.ndarray) -> RawPrediction:
@@ -325,8 +352,13 @@ class PlannedTripCalibrator:
         return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
                 "conditions_range": self.conditions_range_,
                 "excess_rel": np.array([self.excess_rel_]),
+                **{f"trace_gap.{k}": v for k, v in self._gap_arrays().items()},
                 **{f"graded.{k}": v for k, v in (self.graded_.to_arrays().items()
                                                   if self.graded_ is not None else ())}}
+
+    def _gap_arrays(self) -> dict[str, np.ndarray]:
+        gap = getattr(self, "trace_gap_", None)
+        return {} if gap is None else gap.to_arrays()
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
@@ -355,12 +387,13 @@ class PlannedTripCalibrator:
         out.excess_rel_ = float(c[0])
         graded = {k[len("graded."):]: v for k, v in a.items() if k.startswith("graded.")}
         out.graded_ = cls.from_arrays(graded) if graded else None  # older files: none
+        gap = {k[len("trace_gap."):]: v for k, v in a.items() if k.startswith("trace_gap.")}
+        out.trace_gap_ = TraceGap.from_arrays(gap) if gap else None  # older files: none
         out._build()
         return out
 
 
 _CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
-_RIDGE = 1.0  # penalty on the slopes (standardised units), not on the intercept
 _MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
 
 
@@ -380,41 +413,6 @@ def _design(conditions: np.ndarray) -> np.ndarray:
 
 
 def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Ridge coefficients of ``target`` on :func:`_design`, slopes shrunk by :data:`_RIDGE`."""
-    x = _design(conditions)
-    mu, sd = x[:, 1:].mean(axis=0), x[:, 1:].std(axis=0)
-    sd = np.where(sd > 1e-9, sd, 1.0)
-    z = (x[:, 1:] - mu) / sd
-    t0 = float(np.mean(target))
-    b = np.linalg.solve(z.T @ z + _RIDGE * np.eye(z.shape[1]), z.T @ (target - t0))
-    slopes = b / sd
-    return np.r_[t0 - mu @ slopes, slopes]
-
-
-def conditions_of(table: pd.DataFrame) -> np.ndarray:
-    """(n, 2) mean speed (km/h) and temperature (°C) of a trip table."""
-    return np.column_stack([table["avg_speed_kmh"].to_numpy(float),
-                            table["temperature_c"].to_numpy(float)])
-
-
-
-def net_grade_pct(trips: pd.DataFrame, traces) -> np.ndarray | None:
-    """Net grade (%) of each trip over its logged trace, ``100 * rise / distance``,
-    shape (n_trips,); None when no trip's trace has a grade (no elevation logged).
-
-    What a planned trip's ``grade_pct`` says (the net climb over the distance), so the
-    calibration of planned trips given a grade scores the training trips with it.
-    Trips without a trace get 0.
-    """
-    start, trip = traces.intervals()
-    dt = traces.t_s[start + 1] - traces.t_s[start]
-    dx = 0.5 * (traces.speed_mps[start] + traces.speed_mps[start + 1]) * dt
-    dz = dx * np.tan(0.5 * (traces.grade_rad[start] + traces.grade_rad[start + 1]))
-    n = len(traces)
-    if not np.any(traces.grade_rad):
-        return None
-    grade = 100.0 * np.bincount(trip, dz, minlength=n) / np.maximum(
-        np.bincount(trip, dx, minlength=n), 1e-9)
-    pos = pd.Index(traces.trip_id).get_indexer(trips["trip_id"].astype(object))
-    out = np.where(pos >= 0, grade[np.maximum(pos, 0)], 0.0)
-    return np.clip(out, -30.0, 30.0)
+    """Ridge coefficients of ``target`` on :func:`_design` (:func:`~hybridev.learning.
+    trace_gap.ridge_fit`)."""
+    return ridge_fit(_design(conditions), target)

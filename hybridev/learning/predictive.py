@@ -212,13 +212,16 @@ def build_distribution(physics_draws_kwh: np.ndarray, energy_physics_kwh: np.nda
     return EnergyDistribution(centred, mean, std)
 
 
-def raw_prediction(table, dists: list[EnergyDistribution], mode_means=None) -> RawPrediction:
+def raw_prediction(table, dists: list[EnergyDistribution], mode_means=None, *,
+                   physics=None, columns=None) -> RawPrediction:
     """The :class:`~hybridev.learning.steps.RawPrediction` of the fitted model's
     distribution ``dists[0]`` and the CV+ folds' ``dists[1:]``, with the moments the
-    calibrator and the out-of-domain step read."""
+    calibrator and the out-of-domain step read. ``physics``: physics columns still to
+    append to ``table``; ``columns``: the physics table's columns as arrays."""
     dist, folds = dists[0], dists[1:]
     return RawPrediction(
-        table=table, dist=dist, folds=folds, mode_means=mode_means, mean=dist.mean(),
+        base=table, physics=dict(physics or {}), columns=columns,
+        dist=dist, folds=folds, mode_means=mode_means, mean=dist.mean(),
         std=dist.std(),
         fold_means=np.stack([d.mean() for d in folds]) if folds else None,
         fold_stds=(np.maximum(np.stack([d.std() for d in folds]), 1e-12) if folds else None),

@@ -92,6 +92,11 @@ def hold_inputs(table, distance_range, relative: bool):
     return out, (np.ones_like(d) if relative else 1.0 / ratio)
 
 
+def _column(table, name: str) -> np.ndarray:
+    """Column ``name`` (float) of a table or of a dict of column arrays."""
+    return table[name] if isinstance(table, dict) else table[name].to_numpy(float)
+
+
 class ResidualLearner:
     """Standardised deep ensemble on the physics residual.
 
@@ -187,8 +192,12 @@ class ResidualLearner:
             return xs  # as TrainingDomain.clip_features: no extrapolation
         return np.clip(xs, domain.feature_lo, domain.feature_hi).astype(xs.dtype)
 
-    def features(self, physics_table: pd.DataFrame, domain=None) -> np.ndarray:
-        """Standardised network inputs (n_trips, n_features) of a physics table."""
+    def features(self, physics_table, domain=None) -> np.ndarray:
+        """Standardised network inputs (n_trips, n_features) of a physics table (or of
+        its columns as arrays by name, :meth:`column_features`)."""
+        if isinstance(physics_table, dict):
+            return self.column_features(physics_table, len(physics_table["distance_km"]),
+                                        domain)
         return self.standardized(trip_features(physics_table, self.feature_names), domain)
 
     def column_features(self, columns: dict, n_trips: int, domain=None) -> np.ndarray:
@@ -232,7 +241,8 @@ class ResidualLearner:
                         domain=None) -> list[tuple[np.ndarray, np.ndarray | None]]:
         """Step 3 of the predictive path: :meth:`moments` of each ensemble in ``nets``.
 
-        ``tables``: physics tables (one per physics); ``index[i]``: the table of
+        ``tables``: physics tables (one per physics; or their columns as arrays by
+        name, :meth:`PhysicsDraws.entry_columns`); ``index[i]``: the table of
         ``nets[i]`` (``None``: ``net_``). Inputs are held inside ``distance_range``
         (km, :func:`hold_inputs`) and ``domain``'s feature range; each table's inputs
         are built once.
@@ -242,16 +252,17 @@ class ResidualLearner:
             if e not in inputs:
                 table = tables[e]
                 held, factor = hold_inputs(table, distance_range, self.relative)
-                scale = self.target_scale(table["energy_kwh_physics"].to_numpy(float),
-                                          table["distance_km"].to_numpy(float)) * factor
+                scale = self.target_scale(_column(table, "energy_kwh_physics"),
+                                          _column(table, "distance_km")) * factor
                 inputs[e] = (self.features(held, domain), scale)
             out.append(self.moments(*inputs[e], net=net))
         return out
 
-    def point(self, table: pd.DataFrame, domain=None) -> np.ndarray:
-        """Point energy (kWh) of a physics table, without the distance hold (n_trips,)."""
-        e = table["energy_kwh_physics"].to_numpy(float)
-        scale = self.target_scale(e, table["distance_km"].to_numpy(float))
+    def point(self, table, domain=None) -> np.ndarray:
+        """Point energy (kWh) of a physics table (or its columns as arrays by name),
+        without the distance hold (n_trips,)."""
+        e = _column(table, "energy_kwh_physics")
+        scale = self.target_scale(e, _column(table, "distance_km"))
         return self.combine(e, self.moments(self.features(table, domain), scale)[0].mean(0))
 
     def point_of_columns(self, columns: dict, n_trips: int, distance_range, domain=None

@@ -17,18 +17,20 @@ value                       made by                                 read by
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
-from hybridev.physics.trips import append_columns, with_physics_columns
+from hybridev.physics.trips import _physics_columns, append_columns
 
 __all__ = ["ARRAY_COLUMNS", "CalibratedInterval", "DomainAssessment", "PhysicsDraws",
            "RawPrediction", "table_columns"]
 
 ARRAY_COLUMNS = ("distance_km", "avg_speed_kmh", "temperature_c", "soc_initial", "hour",
-                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics")
+                 "grade_pct", "max_speed_kmh", "energy_kwh_physics", "kwh_per_km_physics",
+                 "elevation_gain_m", "elevation_loss_m")
 """Float columns of a physics table that the point prediction reads."""
 
 
@@ -49,11 +51,17 @@ class PhysicsDraws:
     ----------
     table : pandas.DataFrame, (n_trips, ...)
         The validated trips (``mode`` ``None`` where unknown); with the physics columns
-        once :meth:`faded` (or from the start without a posterior).
+        from the start without a posterior, unless :attr:`append` holds them.
     columns : dict of str to numpy.ndarray
-        The table's columns the point prediction reads, as arrays.
+        The table's columns the prediction reads (:data:`ARRAY_COLUMNS` and ``mode``),
+        as arrays, each looked up once; with the physics columns of the model's
+        physics once :meth:`faded` (posterior physics).
     append : dict of str to numpy.ndarray
-        Physics columns still to append to ``table`` (the fast path without a posterior).
+        Physics columns still to append to ``table``: the fast path without a
+        posterior, and the model's physics once :meth:`faded`.
+    physics : list of dict of str to numpy.ndarray
+        Per physics, after :meth:`faded` (posterior physics): its four physics
+        columns (:func:`hybridev.physics.trips.with_physics_columns`).
     energies : list of numpy.ndarray, each (1 + n_draws, n_trips), kWh
         Per physics (the model's, then each CV+ fold's): the posterior median, then the
         draws, with the discrepancy at full weight; the nominal physics (one row)
@@ -69,7 +77,8 @@ class PhysicsDraws:
         For trips lacking the mode every training trip had: their physics under each
         mode (by name); empty otherwise.
     tables : list of pandas.DataFrame
-        Per physics, its table (after :meth:`faded`).
+        Per physics, its table (after :meth:`faded`; built on first use: the predictive
+        path reads :meth:`entry_columns` and builds its output table once).
     """
 
     table: pd.DataFrame
@@ -81,7 +90,26 @@ class PhysicsDraws:
     max_speed_kmh: np.ndarray | None = None
     capacity_kwh: float = 0.0
     modes: dict = field(default_factory=dict)
-    tables: list = field(default_factory=list)
+    physics: list = field(default_factory=list)
+    built: list | None = field(default=None, repr=False)
+
+    @property
+    def tables(self) -> list[pd.DataFrame]:
+        """Per physics, the validated trips with its physics columns (after :meth:`faded`)."""
+        if self.built is None:
+            self.built = [append_columns(self.table, p) for p in self.physics]
+        return self.built
+
+    def entry_columns(self, entry: int = 0) -> dict[str, np.ndarray]:
+        """:attr:`columns` of the table of ``entry`` (after :meth:`faded`)."""
+        if self.physics:
+            return {**self.columns, **self.physics[entry]}
+        return self.columns or table_columns(self.tables[entry])
+
+    def output_parts(self) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+        """``(table, physics)``: the model's physics table is ``table`` with the columns
+        ``physics`` appended (after :meth:`faded`)."""
+        return (self.table, self.physics[0]) if self.physics else (self.tables[0], {})
 
     @property
     def posterior(self) -> bool:
@@ -98,8 +126,8 @@ class PhysicsDraws:
         modes = {m: d.faded(mode_fade) for m, d in self.modes.items()}
         if not self.posterior:
             full = append_columns(self.table, self.append) if self.append else self.table
-            return replace(self, tables=[full] * len(self.energies), modes=modes)
-        energies, tables = [], []
+            return replace(self, built=[full] * len(self.energies), modes=modes)
+        cols, energies, physics = self.columns or table_columns(self.table), [], []
         for energy, plain in zip(self.energies, self.plain, strict=True):
             if fade is not None and plain is not None:
                 p = plain()
@@ -108,10 +136,10 @@ class PhysicsDraws:
                 blend += p
                 energy = blend
             energies.append(energy[1:] if self.n_draws else energy[:1])
-            tables.append(with_physics_columns(self.table, energy[0], self.max_speed_kmh,
-                                               self.capacity_kwh))
-        return replace(self, energies=energies, tables=tables, table=tables[0],
-                       columns={}, modes=modes)
+            physics.append(_physics_columns(energy[0], self.max_speed_kmh, self.capacity_kwh,
+                                            cols["soc_initial"], cols["distance_km"]))
+        return replace(self, energies=energies, physics=physics, built=None, modes=modes,
+                       columns={**cols, **physics[0]}, append=physics[0])
 
     def point_columns(self) -> dict[str, np.ndarray]:
         """The columns the point prediction reads, as arrays (after :meth:`faded`)."""
@@ -171,14 +199,17 @@ class DomainAssessment:
     interp_gap: np.ndarray | None = None
 
 
-@dataclass
+@dataclass(init=False)
 class RawPrediction:
     """The uncalibrated prediction of a batch of trips.
 
     Attributes
     ----------
+    base : pandas.DataFrame, (n_trips, ...)
+        Validated trips; with the physics columns unless :attr:`physics` holds them.
     table : pandas.DataFrame, (n_trips, ...)
-        Validated trips with the physics columns.
+        Validated trips with the physics columns (``base`` and ``physics``, built on
+        first use).
     dist : EnergyDistribution
         The raw predictive distribution of the fitted model (spread factor 1).
     folds : list of EnergyDistribution
@@ -194,9 +225,14 @@ class RawPrediction:
         Variance of the physics draws.
     excess_var : numpy.ndarray, shape (n_trips,), kWh^2
         ``dist``'s variance beyond the draws' (:meth:`EnergyDistribution.excess_var`).
+    physics : dict of str to numpy.ndarray
+        Physics columns still to append to ``base`` (empty: ``base`` has them).
+    columns : dict of str to numpy.ndarray or None
+        The physics table's columns as arrays (:meth:`PhysicsDraws.entry_columns`;
+        None: read from :attr:`table`).
     """
 
-    table: pd.DataFrame
+    base: pd.DataFrame
     dist: EnergyDistribution  # noqa: F821 (hybridev.learning.predictive)
     folds: list = field(default_factory=list)
     mode_means: np.ndarray | None = None
@@ -206,6 +242,23 @@ class RawPrediction:
     fold_stds: np.ndarray | None = None
     var_draws: np.ndarray | None = None
     excess_var: np.ndarray | None = None
+    physics: dict = field(default_factory=dict)
+    columns: dict | None = None
+
+    def __init__(self, table=None, dist=None, folds=None, mode_means=None, mean=None,
+                 std=None, fold_means=None, fold_stds=None, var_draws=None, excess_var=None,
+                 physics=None, columns=None, *, base=None) -> None:
+        # ``table`` (the physics table, as before) or ``base`` with ``physics`` to append
+        self.base = table if base is None else base
+        self.dist, self.folds, self.mode_means = dist, list(folds or []), mode_means
+        self.mean, self.std, self.fold_means, self.fold_stds = mean, std, fold_means, fold_stds
+        self.var_draws, self.excess_var = var_draws, excess_var
+        self.physics, self.columns = dict(physics or {}), columns
+
+    @functools.cached_property
+    def table(self) -> pd.DataFrame:
+        """Validated trips with the physics columns (built on first use)."""
+        return append_columns(self.base, self.physics) if self.physics else self.base
 
 
 @dataclass

@@ -27,7 +27,8 @@ __all__ = [
 REQUIRED_TRIP_COLUMNS = ("distance_km", "avg_speed_kmh", "mode", "temperature_c", "soc_initial")
 """Columns every trip table must have."""
 
-OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id", "parked_min", "duration_s")
+OPTIONAL_TRIP_COLUMNS = ("hour", "grade_pct", "trip_id", "parked_min", "duration_s",
+                         "elevation_gain_m", "elevation_loss_m")
 """Columns a trip table may have."""
 
 
@@ -65,6 +66,12 @@ TRIP_RULES: dict[str, FieldRule] = {
     "soc_initial": FieldRule(0.0, 1.0, hint="a fraction; a SoC in percent divides by 100"),
     "hour": FieldRule(0.0, 24.0, hi_open=True),
     "grade_pct": FieldRule(-30.0, 30.0),
+    "elevation_gain_m": FieldRule(0.0, 20000.0, missing_ok=True,
+                                  hint="total climb over the trip in metres (planned trips); "
+                                       "empty: unknown"),
+    "elevation_loss_m": FieldRule(0.0, 20000.0, missing_ok=True,
+                                  hint="total descent over the trip in metres, >= 0 (planned "
+                                       "trips); empty: unknown"),
     "parked_min": FieldRule(0.0, 1e7, missing_ok=True,
                             hint="minutes parked since the previous trip ended; empty: "
                                  "unknown, taken as soaked to ambient"),

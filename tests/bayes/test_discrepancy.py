@@ -95,3 +95,26 @@ def test_regen_multipliers_never_recover_more_than_the_braking_energy(stats):
     with pytest.raises(ValueError, match="upper"):
         TermDiscrepancy(np.full(N_TERMS, 2.0), np.zeros((0, 0)), np.zeros(N_TERMS, bool),
                         upper=np.ones(N_TERMS))
+
+
+def test_sample_with_the_cached_factor_is_multivariate_normal_bit_for_bit():
+    """The covariance factor is computed once per fit; the draws stay numpy's
+    ``multivariate_normal(method="eigh")`` draws exactly (and consume the same stream)."""
+    rs = np.random.default_rng(3)
+    for k in (1, 4, 9):
+        a = rs.normal(size=(k, k))
+        active = np.zeros(N_TERMS, dtype=bool)
+        active[rs.choice(N_TERMS, k, replace=False)] = True
+        d = TermDiscrepancy(np.ones(N_TERMS), a @ a.T * 0.01, active)
+        for seed, n in ((0, 1), (1, 50), (2, 7)):
+            r1, r2 = np.random.default_rng(seed), np.random.default_rng(seed)
+            want = np.tile(d.weights, (n, 1))
+            want[:, active] += r2.multivariate_normal(np.zeros(k), d.cov, size=n,
+                                                      method="eigh")
+            assert np.array_equal(d.sample(n, r1), np.clip(want, 0.0, d.upper))
+            assert r1.random() == r2.random()
+        d.cov = d.cov * 4.0  # a reassigned covariance is not served from the cache
+        r1, r2 = np.random.default_rng(9), np.random.default_rng(9)
+        want = np.tile(d.weights, (5, 1))
+        want[:, active] += r2.multivariate_normal(np.zeros(k), d.cov, size=5, method="eigh")
+        assert np.array_equal(d.sample(5, r1), np.clip(want, 0.0, d.upper))

@@ -47,6 +47,9 @@ def test_readme_quotes_the_committed_results():
         assert f"| {h['mape'][key]:.2f} % |" in readme, key
     for v in h["coverage"].values():
         assert f"| {v['coverage']:.3f} | {100 * v['rel_width']:.0f} % of the energy |" in readme
+    p = h["planned"]
+    assert (f"{p['mape']:.2f} % MAPE against {p['linreg']:.2f} %" in readme
+            and f"{p['coverage']:.3f} inside the 90 % intervals" in readme)
     r = h["risk"]
     assert f"{100 * r['mean']:.1f} % ± {100 * r['se']:.1f} %" in readme
     assert f"did {100 * h['risk_neutral']:.0f} % of the time" in readme

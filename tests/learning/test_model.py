@@ -521,7 +521,8 @@ def test_trips_without_their_trace_are_planned_trips_not_out_of_the_domain(small
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sd = raw_distributions(m, trips)[0][0].std() * m.planned_.correction(
-            conditions_of(trips))  # steps 1-4 and the planned mean correction
+            conditions_of(trips)) * m.planned_.trace_gap_.factor(
+            trips["avg_speed_kmh"].to_numpy(float))  # steps 1-4, the planned corrections
     half = (planned.energy_kwh_hi - planned.energy_kwh_lo).to_numpy() / 2
     np.testing.assert_allclose(half[ok], (m.planned_.quantile(0.9) * sd)[ok],
                                rtol=1e-6)

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from sklearn.base import clone
 
@@ -162,3 +163,25 @@ def test_another_battery_capacity_after_loading_changes_the_soc_only():
     s0 = trips["soc_initial"].to_numpy()
     np.testing.assert_allclose(after["soc_final_pred"],
                                np.clip(s0 - after["energy_kwh_pred"] / (2 * cap), 0, 1))
+
+
+def test_single_trip_rows_equal_the_batch_rows(model):
+    """The single-trip path (columns as arrays, one output build) gives each trip the row
+    the batch gives it: every column, dtype and the index; the values to 1e-11 (the
+    posterior physics' matrix sums round by batch shape: about 5e-13 here). A lone trip
+    without a mode has an all-missing ``mode`` column, which pandas stores as object
+    (``None``, where the batch's string column holds NaN)."""
+    trips = _trips()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        batch = model.predict_interval(trips, 0.8, seed=4)
+        point = model.predict(trips)
+        for i in range(len(trips)):
+            one = trips.iloc[[i]]
+            for got, want in ((model.predict_interval(one, 0.8, seed=4), batch.iloc[[i]]),
+                              (model.predict(one), point.iloc[[i]])):
+                assert list(got.columns) == list(want.columns)
+                assert got["mode"].isna().tolist() == want["mode"].isna().tolist()
+                pd.testing.assert_frame_equal(got.drop(columns="mode"),
+                                              want.drop(columns="mode"), rtol=1e-11,
+                                              atol=1e-12)

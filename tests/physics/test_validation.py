@@ -47,7 +47,8 @@ def test_valid_table_passes_as_float_copy():
 def test_optional_columns_may_be_absent():
     t = trips()[list(REQUIRED_TRIP_COLUMNS)]
     assert len(validate_trips(t)) == 4
-    assert set(OPTIONAL_TRIP_COLUMNS) == {"hour", "grade_pct", "trip_id", "parked_min", "duration_s"}
+    assert set(OPTIONAL_TRIP_COLUMNS) == {"hour", "grade_pct", "trip_id", "parked_min", "duration_s",
+                                          "elevation_gain_m", "elevation_loss_m"}
 
 
 @pytest.mark.parametrize("field, value, allowed", [
