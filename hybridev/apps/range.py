@@ -376,9 +376,9 @@ def predict_range(model: HybridModel, conditions: pd.DataFrame, *, soc_initial,
     ...     warnings.simplefilter("ignore")
     ...     out = predict_range(HybridModel(n_steps=200), c, soc_initial=0.8, soc_reserve=0.1)
     >>> round(float(out.range_km_q50[0]))  # unfitted: physics only, every band equal
-    279
+    290
     >>> from hybridev import simulate  # one soaked leg, then warm legs at the mid SoC
-    >>> leg = float(out.leg_km[0])     # 50 km without training trips
+    >>> leg = float(out.leg_km[0])  # no training trips: the additive length (28 km here)
     >>> legs = pd.concat([c.assign(soc_initial=0.8), c.assign(soc_initial=0.45, parked_min=0.0)])
     >>> e = simulate(legs.assign(distance_km=leg), n_steps=200).energy_kwh_physics.to_numpy()
     >>> round(float(e[0] + (out.range_km_q50[0] - leg) / leg * e[1]), 1)  # 0.7 x 75 kWh
