@@ -365,6 +365,7 @@ def test_summary_card_comes_first_and_answers_the_three_questions(run):
         (t, c) for t in ("city", "highway") for c in (20.0, 0.0)}
     for r in ref:
         assert r["kwh_per_100km_lo"] <= r["kwh_per_100km"] <= r["kwh_per_100km_hi"]
+        assert r["mode"] == ("normal" if run["result"].model.domain_.needs_mode else None)
         assert f"<b>{r['kwh_per_100km']:.1f}</b>" in text[card:detail]
     assert "20 °C" in text[card:detail] and "0 °C" in text[card:detail]
     p = pd.read_csv(run["out"] / "predictions.csv")

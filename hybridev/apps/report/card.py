@@ -25,13 +25,20 @@ import warnings
 import numpy as np
 import pandas as pd
 
-__all__ = ["REFERENCE_SOC", "REFERENCE_TEMPERATURES_C", "REFERENCE_TRIPS", "accuracy_sentence",
-           "calibration_verdict", "reference_consumption", "warning_sentences"]
+__all__ = ["REFERENCE_MODE", "REFERENCE_SOC", "REFERENCE_TEMPERATURES_C", "REFERENCE_TRIPS",
+           "accuracy_sentence", "calibration_verdict", "reference_consumption",
+           "warning_sentences"]
 
 REFERENCE_TRIPS = {"city": {"distance_km": 10.0, "avg_speed_kmh": 30.0},
                    "highway": {"distance_km": 40.0, "avg_speed_kmh": 100.0}}
 """Reference trips of the card: a 10 km city trip at 30 km/h mean speed, a 40 km highway
-trip at 100 km/h (flat, no driving mode given: marginalised, as for a planned trip)."""
+trip at 100 km/h (flat). When the training trips all had a driving ``mode``, the
+reference trips are driven in :data:`REFERENCE_MODE` (marginalising over the modes
+would give the spread between an eco and an aggressive driver, not the model's
+uncertainty); otherwise they have none, as the training trips."""
+
+REFERENCE_MODE = "normal"
+"""Driving mode of the reference trips of a model trained on trips with a mode."""
 
 REFERENCE_TEMPERATURES_C = (20.0, 0.0)
 """Ambient temperatures (°C) of the reference trips."""
@@ -54,7 +61,8 @@ def reference_consumption(model, level: float, seed: int = 0) -> list[dict]:
     Returns
     -------
     list of dict
-        One per trip and temperature: ``trip``, ``distance_km``, ``avg_speed_kmh``,
+        One per trip and temperature: ``trip``, ``distance_km``, ``mode`` (None when
+        the reference trips have none), ``avg_speed_kmh``,
         ``temperature_c``, ``kwh_per_100km`` with ``_lo``/``_hi`` (``None`` when the
         level cannot be reached), ``in_domain`` and ``domain_score``. An empty list
         when the model cannot predict them.
@@ -62,6 +70,8 @@ def reference_consumption(model, level: float, seed: int = 0) -> list[dict]:
     rows = [{"trip": name, **spec, "temperature_c": t, "soc_initial": REFERENCE_SOC}
             for t in REFERENCE_TEMPERATURES_C for name, spec in REFERENCE_TRIPS.items()]
     trips = pd.DataFrame(rows)
+    if getattr(getattr(model, "domain_", None), "needs_mode", False):
+        trips["mode"] = REFERENCE_MODE
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # out-of-domain conditions are reported per row
         try:
@@ -75,6 +85,7 @@ def reference_consumption(model, level: float, seed: int = 0) -> list[dict]:
         bounded = math.isfinite(lo) and math.isfinite(hi)
         result.append({
             "trip": r["trip"], "distance_km": r["distance_km"],
+            "mode": str(trips["mode"].iloc[i]) if "mode" in trips else None,
             "avg_speed_kmh": r["avg_speed_kmh"], "temperature_c": r["temperature_c"],
             "kwh_per_100km": float(out["energy_kwh_pred"].iloc[i]) * per100[i],
             "kwh_per_100km_lo": lo * per100[i] if bounded else None,

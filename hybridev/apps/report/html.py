@@ -136,13 +136,14 @@ def _consumption_card(s: dict) -> str:
                     f"{r0['distance_km']:g} km at {r0['avg_speed_kmh']:g} km/h</span></td>"
                     f"{''.join(tds)}</tr>")
     lv = s["level"]
-    star_note = (" *: unlike the training trips (weather, speed or length outside theirs, "
-                 "or no logged speed trace where the model was trained on traces), so the "
-                 "interval is widened: the physics posterior's spread." if starred else "")
+    star_note = (" *: beyond the conditions of the training trips (temperature, speed or "
+                 "grade), so the interval is widened." if starred else "")
+    mode = ref[0].get("mode")
+    driven = f" driven in {html.escape(mode)} mode," if mode else ""
     return (f"<div class='scroll'><table><thead><tr><th>kWh/100 km</th>{head}</tr></thead>"
             f"<tbody>{''.join(body)}</tbody></table></div><p class='small'>Predicted by the "
-            f"hybrid, with its {T.level_text(lv)} interval, for a flat trip starting at 80 % state of "
-            f"charge with the cabin at ambient temperature.{star_note}</p>")
+            f"hybrid, with its {T.level_text(lv)} interval, for a flat trip{driven} starting at "
+            f"80 % state of charge with the cabin at ambient temperature.{star_note}</p>")
 
 
 def _summary_card(s: dict) -> str:
