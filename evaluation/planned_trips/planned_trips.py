@@ -60,6 +60,9 @@ from study_io import DEFAULT_DATA, run_study, write_markdown
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baseline_conformal import conformal_baseline
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "real_weather"))
+from real_weather import _summary_x  # the linear regression's summary design, as there
+
 from hybridev import HybridModel
 from hybridev.learning.trace_gap import logged_elevation_m
 from hybridev.physics.stats_build import trip_stats
@@ -77,16 +80,6 @@ def _summary(root: Path, ids: np.ndarray) -> pd.DataFrame:
     s = src.loc[ids]
     return pd.DataFrame({c: s[c].to_numpy(float) for c in
                          ("duration_s", "elev_gain_m", "elev_loss_m", "elev_net_m")})
-
-
-def _summary_x(trips: pd.DataFrame, extra: pd.DataFrame) -> np.ndarray:
-    d = trips["distance_km"].to_numpy(float)
-    h = extra["duration_s"].to_numpy(float) / 3600.0
-    v = trips["avg_speed_kmh"].to_numpy(float)
-    t = trips["temperature_c"].to_numpy(float)
-    return np.column_stack([d, h, d * v * v / 1e4, h * np.abs(t - 21.0),
-                            extra["elev_gain_m"].to_numpy(float) / 100.0,
-                            extra["elev_loss_m"].to_numpy(float) / 100.0])
 
 
 def _interval_scores(y: np.ndarray, out: pd.DataFrame) -> dict:
