@@ -41,7 +41,7 @@ from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import GapRate, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
-from hybridev.learning.trace_gap import fit_trace_gap, logged_elevation_m
+from hybridev.learning.trace_gap import fit_trace_gap, logged_elevation_m, logged_energy_kwh
 
 __all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
            "fit_physics", "fit_planned", "fit_summary", "split_trips"]
@@ -264,7 +264,7 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
         def calibrator(trips, elevation=None):
             mu, sd = scored(trips)
             # the trace gap never sees the measured energy: the scores use the final one
-            gap = fit_trace_gap(model, trips, traces, elevation)
+            gap = fit_trace_gap(model, trips, traces, elevation, e_log=e_log)
             factor = gap.factor(trips["avg_speed_kmh"].to_numpy(float), elevation)
             return PlannedTripCalibrator().fit(
                 e_meas[idx], mu * factor[idx], np.maximum(sd * factor[idx], 1e-12), g_plan,
@@ -274,6 +274,7 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
 
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))
+        e_log = logged_energy_kwh(model, good, traces)  # the same for both calibrations
         planned = calibrator(good)
         grade = None if "grade_pct" in good.columns else net_grade_pct(good, traces)
         if grade is not None:  # planned trips given a grade: scored with the logged one

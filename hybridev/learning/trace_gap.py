@@ -39,7 +39,8 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["ELEVATION_COLUMNS", "TraceGap", "conditions_of", "elevation_of",
-           "fit_trace_gap", "logged_elevation_m", "net_grade_pct", "ridge_fit"]
+           "fit_trace_gap", "logged_elevation_m", "logged_energy_kwh", "net_grade_pct",
+           "ridge_fit"]
 
 ELEVATION_COLUMNS = ("elevation_gain_m", "elevation_loss_m")
 """Optional planned-trip inputs: total climb and total descent over the trip, m (>= 0)."""
@@ -166,17 +167,26 @@ class TraceGap:
         return out
 
 
-def fit_trace_gap(model, trips: pd.DataFrame, traces, elevation=None) -> TraceGap:
+def logged_energy_kwh(model, trips: pd.DataFrame, traces) -> np.ndarray:
+    """The fitted ``model``'s posterior-median physics energy (kWh) of ``trips`` on their
+    logged traces, shape (n_trips,)."""
+    return np.asarray(model.physics_.columns(trips, traces=traces)[1]["energy_kwh_physics"],
+                      float)
+
+
+def fit_trace_gap(model, trips: pd.DataFrame, traces, elevation=None, *,
+                  e_log=None) -> TraceGap:
     """:class:`TraceGap` of ``trips`` (all with a logged trace) under a fitted ``model``.
 
-    The physics energies are the model's posterior median on the logged traces and on
-    the synthesised ones of the same summaries (``trips`` as a planned trip would give
-    them: with ``grade_pct`` when the planned trips have it). ``elevation``: climb and
-    descent per km (n, 2), m/km, or None.
+    The physics energies are the model's posterior median on the logged traces
+    (``e_log``, kWh, (n_trips,), computed by :func:`logged_energy_kwh` when not given)
+    and on the synthesised ones of the same summaries (``trips`` as a planned trip would
+    give them: with ``grade_pct`` when the planned trips have it). ``elevation``: climb
+    and descent per km (n, 2), m/km, or None.
     """
-    phys = model.physics_
-    e_syn = np.asarray(phys.columns(trips)[1]["energy_kwh_physics"], float)
-    e_log = np.asarray(phys.columns(trips, traces=traces)[1]["energy_kwh_physics"], float)
+    e_syn = np.asarray(model.physics_.columns(trips)[1]["energy_kwh_physics"], float)
+    if e_log is None:
+        e_log = logged_energy_kwh(model, trips, traces)
     return TraceGap().fit(trips["avg_speed_kmh"].to_numpy(float), e_log, e_syn, elevation)
 
 
