@@ -156,9 +156,15 @@ def additive_leg_km(avg_speed_kmh, mode, n_steps: int) -> np.ndarray:
 
 
 def leg_lengths_km(model, cond: pd.DataFrame) -> np.ndarray:
-    """Leg length per condition (n,), km: :func:`leg_length_km`, at most :func:`additive_leg_km`.
+    """Leg length per condition (n,), km: the middle of the familiar lengths there.
 
-    Not shorter than the shortest training trip (when the model knows it).
+    The familiar lengths run from the shortest training trip to the longest familiar
+    leg, :func:`leg_length_km` at most :func:`additive_leg_km`; the leg is their
+    midpoint. Not the longest: a synthesised trace of ``n_steps`` samples is coarsest
+    (fewest samples per drive cycle) at the additive length, and its energy per km
+    drifts there, so a drive of legs at the limit is not a drive of typical trips;
+    the middle of the span is. Without the training distances (an unfitted model)
+    the longest familiar leg.
     """
     n = len(cond)
     leg = np.full(n, leg_length_km(model))
@@ -167,8 +173,9 @@ def leg_lengths_km(model, cond: pd.DataFrame) -> np.ndarray:
                              getattr(model, "n_steps", 1000))
     out = np.minimum(leg, steady)
     span = (getattr(model, "fit_info_", None) or {}).get("distance_km_range")
-    if span:
-        out = np.maximum(out, min(float(span[0]), leg[0]) if n else 0.0)
+    if span and n:
+        shortest = min(float(span[0]), leg[0])
+        out = (shortest + np.maximum(out, shortest)) / 2.0
     return out
 
 
