@@ -48,16 +48,21 @@ values, and a design of a few fixed conditions (speeds 40, 60, ... km/h; -5, 20
 and 32 degC) left the interpolation rate at the fixed 0.25 although its own data
 can measure it. :func:`held_out_bands` makes such experiments: for each intensive
 quantity, its training values are grouped into clusters (consecutive values
-within a tolerance); every interior cluster (neither the lowest nor the highest) is
-a band. The residual ensemble is refitted without a band's trips (at most
-:data:`MAX_HELD_BANDS` bands, the widest gaps first; a band of at most half the
-trips), and the band's *calibration* trips, which neither the physics posterior
+within a tolerance); an interior cluster (neither the lowest nor the highest) is
+a band, and per quantity the one farthest from its neighbours is held out (a band of
+at most half the trips; one refit per intensive quantity bounds the fit time). The
+residual ensemble is refitted without the band's trips, and the band's *calibration* trips, which neither the physics posterior
 nor any network saw, are scored by it: their interpolation gap to the remaining
 values (``h > 1`` by construction) and their score say how the error grows between
 the training values. Their scores join the interpolation rate's (the in-domain
 quantile stays that of the ordinary calibration trips). Documented shortcut: the
 refit shares the physics posterior and the input and target standardisation of the
-final model (as the CV+ fold ensembles share the standardisation).
+final model (as the CV+ fold ensembles share the standardisation). The posterior has
+a few global parameters; fitted on the band's training trips it still never saw the
+scored ones. The rate *beyond* the conditions is not learned this way: holding out an
+edge band would leave the posterior's knowledge of it (a heater fitted on the cold
+trips) in the prediction of the band, so only a refit of the posterior too could
+measure it (CV+ does, for its day folds).
 
 Why not weighted conformal prediction (Tibshirani et al. 2019)? It re-weights
 the calibration scores by the likelihood ratio of the new trip's conditions;
