@@ -367,7 +367,8 @@ def band_scores(q: np.ndarray, rest: np.ndarray, scored: np.ndarray, refit, scor
         ``score(rows, net) -> scores``: signed normalised scores ``(y - mu) / s`` of the
         trips ``rows`` (int) under ``net``, (len(rows),).
     edge : bool
-        The bands of :func:`held_out_bands` (interior or edge) of ``q[rest]``.
+        The bands of :func:`held_out_bands` (interior or edge) of ``q[rest]``; none
+        (and no refit) when they hold fewer than :data:`MIN_SHIFTED_TRIPS` scored trips.
 
     Returns
     -------
@@ -378,9 +379,12 @@ def band_scores(q: np.ndarray, rest: np.ndarray, scored: np.ndarray, refit, scor
     """
     q, rest, scored = np.asarray(q, float), np.asarray(rest, int), np.asarray(scored, int)
     out_s, out_g, out_h = [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
-    for k, (j, lo, hi) in enumerate(held_out_bands(q[rest], edge=edge)):
+    bands = held_out_bands(q[rest], edge=edge)
+    held_of = [scored[(q[scored, j] >= lo) & (q[scored, j] <= hi)] for j, lo, hi in bands]
+    if sum(len(h) for h in held_of) < MIN_SHIFTED_TRIPS:  # too few to learn from: no refit
+        bands = []
+    for k, ((j, lo, hi), held) in enumerate(zip(bands, held_of, strict=False)):
         keep = rest[(q[rest, j] < lo) | (q[rest, j] > hi)]
-        held = scored[(q[scored, j] >= lo) & (q[scored, j] <= hi)]
         if not len(held):
             continue
         dom = TrainingDomain(values=tuple(np.unique(q[keep, c]) for c in range(q.shape[1])),

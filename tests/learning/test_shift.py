@@ -191,3 +191,11 @@ def test_split_conformal_fit_learns_both_rates_from_held_out_bands():
     # (20 degC, 60 km/h between; 32 degC, 40 km/h beyond) give shifted trips
     assert r.n_interp_ >= 9
     assert r.n_shifted_ >= 9 and r.learned_
+
+
+def test_bands_holding_too_few_scored_trips_are_not_refitted():
+    q = _design()
+    calls = []
+    s, g, h = band_scores(q, np.arange(0, 295), np.arange(295, 300),
+                          lambda keep, k: calls.append(k), lambda rows, net: np.ones(len(rows)))
+    assert calls == [] and len(s) == len(g) == len(h) == 0
