@@ -228,8 +228,10 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     with their logged net grade: ``planned.graded_``, for planned trips given a
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
-    fitted) without, each against the trip's gap to its fold's training domain. Without
-    a conformal step: ``(None, None, domain)``.
+    fitted) without, each against the trip's gap to its fold's training domain; under
+    split conformal, when too few scored trips lie between (beyond) their fold's
+    values, with those of held-out interior (edge) bands (:func:`held_band_scores`).
+    Without a conformal step: ``(None, None, domain)``.
     """
     domain = model.domain_
     cal = model.calibrator_
@@ -309,7 +311,6 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
     table = physics.table(good, traces)
     stats = physics.stats(valid, traces) if physics.posterior_ is not None else None
     seeds = np.random.SeedSequence([int(seed), 31, int(edge)]).generate_state(16)
-    fits = {}
 
     def arrays(tab):
         e_p = tab["energy_kwh_physics"].to_numpy(float)
@@ -317,7 +318,7 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
         return learner.scaled(trip_features(tab, learner.feature_names),
                               (e_meas - e_p) / scale if learner.residual else e_meas)
 
-    def refit(keep, k):
+    def refit(keep, k):  # the refitted model: its ensemble and physics (None: the model's)
         phys, tab = None, table
         if edge and stats is not None:  # the band's own physics: its heater, its drag
             phys = fold_physics(physics, good.iloc[keep], int(seeds[k % 16]), traces)
@@ -325,14 +326,13 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
         xs, ys = arrays(tab)
         net = learner.train(xs, ys, np.intersect1d(split.train, keep),
                             np.intersect1d(split.val, keep), int(seeds[k % 16]))[0]
-        fits[id(net)] = phys
-        return net
+        return net, phys
 
-    def score(rows, net):
+    def score(rows, refitted):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # out-of-domain warnings of the held-out band
-            d = raw_distributions(model, good.iloc[rows], traces, seed=int(seed), nets=[net],
-                                  physics=[fits[id(net)]])[0][0]
+            d = raw_distributions(model, good.iloc[rows], traces, seed=int(seed),
+                                  nets=[refitted[0]], physics=[refitted[1]])[0][0]
         return (e_meas[rows] - d.mean()) / np.maximum(d.std(), 1e-12)
 
     return band_scores(domain_quantities(good, traces)[0], split.rest, split.cal, refit,

@@ -361,11 +361,12 @@ def band_scores(q: np.ndarray, rest: np.ndarray, scored: np.ndarray, refit, scor
     scored : numpy.ndarray of int
         Trips no part of the model saw (split conformal's calibration trips).
     refit : callable
-        ``refit(keep, band) -> net``: the model refitted on the trips ``keep``
-        (int rows, a subset of ``rest``); ``band`` its index (a seed).
+        ``refit(keep, band) -> refitted``: the model refitted on the trips ``keep``
+        (int rows, a subset of ``rest``; anything ``score`` takes); ``band`` its index
+        (a seed).
     score : callable
-        ``score(rows, net) -> scores``: signed normalised scores ``(y - mu) / s`` of the
-        trips ``rows`` (int) under ``net``, (len(rows),).
+        ``score(rows, refitted) -> scores``: signed normalised scores ``(y - mu) / s``
+        of the trips ``rows`` (int) under the refitted model, (len(rows),).
     edge : bool
         The bands of :func:`held_out_bands` (interior or edge) of ``q[rest]``; none
         (and no refit) when they hold fewer than :data:`MIN_SHIFTED_TRIPS` scored trips.
