@@ -67,7 +67,7 @@ from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
 __all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
-           "fit_cv_plus", "fold_diagnostics", "fold_physics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
+           "fit_cv_plus", "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
@@ -203,10 +203,6 @@ def _fold_physics(physics, trips, seed: int, traces):
                 return out
         return physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
                                   n_steps=FOLD_POSTERIOR_STEPS)
-
-
-fold_physics = _fold_physics
-"""Public name of :func:`_fold_physics` (held-out bands, :mod:`hybridev.learning.fitting`)."""
 
 
 def fold_diagnostics(fold_physics) -> list[dict]:

@@ -30,13 +30,12 @@ from hybridev.learning.cvplus import (
     cv_fold_assignment,
     fit_cv_plus,
     fold_diagnostics,
-    fold_physics,
     warn_calibration,
 )
 from hybridev.learning.domain import TrainingDomain, domain_quantities
 from hybridev.learning.features import trip_features
 from hybridev.learning.gate import ResidualGate
-from hybridev.learning.inputs import check_read_vehicle, validate_prediction_trips
+from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode, cv_plus_folds
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
@@ -229,8 +228,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
     fitted) without, each against the trip's gap to its fold's training domain; under
-    split conformal, when too few scored trips lie between (beyond) their fold's
-    values, with those of held-out interior (edge) bands (:func:`held_band_scores`).
+    split conformal, when too few scored trips lie between their fold's values, with
+    those of held-out interior bands (:func:`held_band_scores`).
     Without a conformal step: ``(None, None, domain)``.
     """
     domain = model.domain_
@@ -250,12 +249,10 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     scores = [cp.residuals]
     g0, h0 = fold_gaps(good, fold, traces, score_traces=traces, interior=True)
     gaps, interp = [g0[idx]], [h0[idx]]  # beyond the fold's conditions / between them
-    for edge, few in ((False, (h0[idx] > 1.0).sum()), (True, (g0[idx] > 1.0).sum())):
-        if not cv and few < MIN_SHIFTED_TRIPS:  # no trip between / beyond: held-out bands
-            s_b, g_b, h_b = held_band_scores(model, good, traces, split, e_meas, seed,
-                                             edge=edge)
-            scores[0] = np.r_[scores[0], s_b]
-            gaps[0], interp[0] = np.r_[gaps[0], g_b], np.r_[interp[0], h_b]
+    if not cv and (h0[idx] > 1.0).sum() < MIN_SHIFTED_TRIPS:  # no trip between: bands
+        s_b, h_b = held_band_scores(model, good, traces, split, e_meas, seed)
+        scores[0] = np.r_[scores[0], s_b]
+        gaps[0], interp[0] = np.r_[gaps[0], np.zeros(len(s_b))], np.r_[interp[0], h_b]
     planned = None
     if traces is not None and domain.needs_trace:
         def scored(trips):  # the scored trips predicted from their summaries
@@ -298,45 +295,32 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
 
 
 def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.ndarray,
-                     seed: int, *, edge: bool = False
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Split conformal: scores and gaps (beyond, between) of the calibration trips of
-    held-out bands (:func:`hybridev.learning.shift.band_scores`), each scored by the
-    residual ensemble refitted without its band (same architecture, early stopping on
-    the validation trips outside the band); an edge band (``edge``) also by a physics
-    posterior refitted without it (warm-started as a CV+ fold's), an interior one by the
-    model's physics."""
-    learner, physics = model.learner_, model.physics_
-    valid = validate_prediction_trips(good)
-    table = physics.table(good, traces)
-    stats = physics.stats(valid, traces) if physics.posterior_ is not None else None
-    seeds = np.random.SeedSequence([int(seed), 31, int(edge)]).generate_state(16)
+                     seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Split conformal: scores and interpolation gaps of the calibration trips of
+    held-out interior bands (:func:`hybridev.learning.shift.band_scores`), each scored
+    by the residual ensemble refitted without its band (same architecture, early
+    stopping on the validation trips outside the band) and the model's physics."""
+    learner = model.learner_
+    table = model.physics_.table(good, traces)
+    e_p = table["energy_kwh_physics"].to_numpy(float)
+    scale = learner.target_scale(e_p, good["distance_km"].to_numpy(float))
+    xs, ys = learner.scaled(trip_features(table, learner.feature_names),
+                            (e_meas - e_p) / scale if learner.residual else e_meas)
+    seeds = np.random.SeedSequence([int(seed), 31]).generate_state(16)
 
-    def arrays(tab):
-        e_p = tab["energy_kwh_physics"].to_numpy(float)
-        scale = learner.target_scale(e_p, good["distance_km"].to_numpy(float))
-        return learner.scaled(trip_features(tab, learner.feature_names),
-                              (e_meas - e_p) / scale if learner.residual else e_meas)
+    def refit(keep, k):
+        return learner.train(xs, ys, np.intersect1d(split.train, keep),
+                             np.intersect1d(split.val, keep), int(seeds[k % 16]))[0]
 
-    def refit(keep, k):  # the refitted model: its ensemble and physics (None: the model's)
-        phys, tab = None, table
-        if edge and stats is not None:  # the band's own physics: its heater, its drag
-            phys = fold_physics(physics, good.iloc[keep], int(seeds[k % 16]), traces)
-            tab = physics.posterior_table(valid, 0, 0, physics=phys, stats=stats, fade=None)[0]
-        xs, ys = arrays(tab)
-        net = learner.train(xs, ys, np.intersect1d(split.train, keep),
-                            np.intersect1d(split.val, keep), int(seeds[k % 16]))[0]
-        return net, phys
-
-    def score(rows, refitted):
+    def score(rows, net):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # out-of-domain warnings of the held-out band
             d = raw_distributions(model, good.iloc[rows], traces, seed=int(seed),
-                                  nets=[refitted[0]], physics=[refitted[1]])[0][0]
+                                  nets=[net])[0][0]
         return (e_meas[rows] - d.mean()) / np.maximum(d.std(), 1e-12)
 
     return band_scores(domain_quantities(good, traces)[0], split.rest, split.cal, refit,
-                       score, edge=edge)
+                       score)
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,
