@@ -49,7 +49,11 @@ physics synthesises each trip as one trace of ``n_steps`` samples with at most
 cycles of its profile gets longer cycles, fewer stops per km and a lower
 consumption per km than the road it models (at 40 km/h and 1000 steps: 62 km
 for "normal", 42 km for "aggressive"). A drive of such legs would depend on
-how it is cut; a drive of legs short enough to keep the cycles does not.
+how it is cut; a drive of legs short enough to keep the cycles does not. Within
+that span the leg is its middle, from the shortest training trip to the longest
+familiar leg (:func:`leg_lengths_km`): at the limit the trace is at its coarsest
+(fewest samples per cycle) and its energy per km has drifted (an aggressive
+profile's, upward), so legs at the limit made long drives pessimistic.
 """
 
 from __future__ import annotations
