@@ -49,7 +49,11 @@ physics synthesises each trip as one trace of ``n_steps`` samples with at most
 cycles of its profile gets longer cycles, fewer stops per km and a lower
 consumption per km than the road it models (at 40 km/h and 1000 steps: 62 km
 for "normal", 42 km for "aggressive"). A drive of such legs would depend on
-how it is cut; a drive of legs short enough to keep the cycles does not.
+how it is cut; a drive of legs short enough to keep the cycles does not. Within
+that span the leg is its middle, from the shortest training trip to the longest
+familiar leg (:func:`leg_lengths_km`): at the limit the trace is at its coarsest
+(fewest samples per cycle) and its energy per km has drifted (an aggressive
+profile's, upward), so legs at the limit made long drives pessimistic.
 """
 
 from __future__ import annotations
@@ -156,9 +160,15 @@ def additive_leg_km(avg_speed_kmh, mode, n_steps: int) -> np.ndarray:
 
 
 def leg_lengths_km(model, cond: pd.DataFrame) -> np.ndarray:
-    """Leg length per condition (n,), km: :func:`leg_length_km`, at most :func:`additive_leg_km`.
+    """Leg length per condition (n,), km: the middle of the familiar lengths there.
 
-    Not shorter than the shortest training trip (when the model knows it).
+    The familiar lengths run from the shortest training trip to the longest familiar
+    leg, :func:`leg_length_km` at most :func:`additive_leg_km`; the leg is their
+    midpoint. Not the longest: a synthesised trace of ``n_steps`` samples is coarsest
+    (fewest samples per drive cycle) at the additive length, and its energy per km
+    drifts there, so a drive of legs at the limit is not a drive of typical trips;
+    the middle of the span is. Without the training distances (an unfitted model)
+    the longest familiar leg.
     """
     n = len(cond)
     leg = np.full(n, leg_length_km(model))
@@ -167,8 +177,9 @@ def leg_lengths_km(model, cond: pd.DataFrame) -> np.ndarray:
                              getattr(model, "n_steps", 1000))
     out = np.minimum(leg, steady)
     span = (getattr(model, "fit_info_", None) or {}).get("distance_km_range")
-    if span:
-        out = np.maximum(out, min(float(span[0]), leg[0]) if n else 0.0)
+    if span and n:
+        shortest = min(float(span[0]), leg[0])
+        out = (shortest + np.maximum(out, shortest)) / 2.0
     return out
 
 

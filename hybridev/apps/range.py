@@ -7,9 +7,9 @@ With the energy budget ``B = (s0 - s_reserve) C`` the range ``R`` satisfies
 
 **A drive, not one giant trip** (:mod:`hybridev.apps.drive`). The drive at
 the queried speed and temperature is a sequence of legs of a familiar length
-``L`` (the median training trip, :func:`~hybridev.apps.drive.leg_length_km`,
-shortened per condition to the length whose synthetic trace keeps its drive
-cycle, :func:`~hybridev.apps.drive.leg_lengths_km`), each a planned trip that the model predicts from its summary: the first leg
+``L`` (the middle of the familiar lengths, :func:`~hybridev.apps.drive.leg_lengths_km`:
+from the shortest training trip to the median one or to the length whose synthetic
+trace keeps its drive cycle), each a planned trip that the model predicts from its summary: the first leg
 starts soaked, every later leg follows without a stop (``parked_min = 0``), so
 the warm-up is paid once. ``E(r)`` for ``r <= L`` is the first leg alone
 (interpolated linearly between soaked legs of ``L / 16 ... L``), and beyond it

@@ -32,19 +32,19 @@ from hybridev.learning.cvplus import (
     fold_diagnostics,
     warn_calibration,
 )
-from hybridev.learning.domain import TrainingDomain
+from hybridev.learning.domain import TrainingDomain, domain_quantities
 from hybridev.learning.features import trip_features
 from hybridev.learning.gate import ResidualGate
 from hybridev.learning.inputs import check_read_vehicle
 from hybridev.learning.params import conformal_mode, cv_plus_folds
 from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
-from hybridev.learning.shift import GapRate, fold_gaps
+from hybridev.learning.shift import MIN_SHIFTED_TRIPS, GapRate, band_scores, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
 from hybridev.learning.trace_gap import fit_trace_gap, logged_elevation_m, logged_energy_kwh
 
 __all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
-           "fit_physics", "fit_planned", "fit_summary", "split_trips"]
+           "fit_physics", "fit_planned", "fit_summary", "held_band_scores", "split_trips"]
 
 
 @dataclass(frozen=True)
@@ -227,8 +227,10 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     with their logged net grade: ``planned.graded_``, for planned trips given a
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
-    fitted) without, each against the trip's gap to its fold's training domain. Without
-    a conformal step: ``(None, None, domain)``.
+    fitted) without, each against the trip's gap to its fold's training domain; under
+    split conformal, when too few scored trips lie between their fold's values, with
+    those of held-out interior bands (:func:`held_band_scores`).
+    Without a conformal step: ``(None, None, domain)``.
     """
     domain = model.domain_
     cal = model.calibrator_
@@ -247,6 +249,10 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     scores = [cp.residuals]
     g0, h0 = fold_gaps(good, fold, traces, score_traces=traces, interior=True)
     gaps, interp = [g0[idx]], [h0[idx]]  # beyond the fold's conditions / between them
+    if not cv and (h0[idx] > 1.0).sum() < MIN_SHIFTED_TRIPS:  # no trip between: bands
+        s_b, h_b = held_band_scores(model, good, traces, split, e_meas, seed)
+        scores[0] = np.r_[scores[0], s_b]
+        gaps[0], interp[0] = np.r_[gaps[0], np.zeros(len(s_b))], np.r_[interp[0], h_b]
     planned = None
     if traces is not None and domain.needs_trace:
         def scored(trips):  # the scored trips predicted from their summaries
@@ -286,6 +292,35 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
         gaps.append(g_plan)
         interp.append(h_plan)
     return planned, GapRate().fit(scores, gaps, interp=interp), domain
+
+
+def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.ndarray,
+                     seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Split conformal: scores and interpolation gaps of the calibration trips of
+    held-out interior bands (:func:`hybridev.learning.shift.band_scores`), each scored
+    by the residual ensemble refitted without its band (same architecture, early
+    stopping on the validation trips outside the band) and the model's physics."""
+    learner = model.learner_
+    table = model.physics_.table(good, traces)
+    e_p = table["energy_kwh_physics"].to_numpy(float)
+    scale = learner.target_scale(e_p, good["distance_km"].to_numpy(float))
+    xs, ys = learner.scaled(trip_features(table, learner.feature_names),
+                            (e_meas - e_p) / scale if learner.residual else e_meas)
+    seeds = np.random.SeedSequence([int(seed), 31]).generate_state(16)
+
+    def refit(keep, k):
+        return learner.train(xs, ys, np.intersect1d(split.train, keep),
+                             np.intersect1d(split.val, keep), int(seeds[k % 16]))[0]
+
+    def score(rows, net):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # out-of-domain warnings of the held-out band
+            d = raw_distributions(model, good.iloc[rows], traces, seed=int(seed),
+                                  nets=[net])[0][0]
+        return (e_meas[rows] - d.mean()) / np.maximum(d.std(), 1e-12)
+
+    return band_scores(domain_quantities(good, traces)[0], split.rest, split.cal, refit,
+                       score)
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,

@@ -42,6 +42,36 @@ history whose days bracket each other closely has no such trips, and needs no
 widening: its ``h`` stays below 1). A model saved before this rate has none
 (interpolation not widened, its predictions unchanged).
 
+**Held-out bands.** Split conformal scores a random share of the trips, whose
+conditions are those of the training trips: it has no trip between its fold's
+values, and a design of a few fixed conditions (speeds 40, 60, ... km/h; -5, 20
+and 32 degC) left the interpolation rate at the fixed 0.25 although its own data
+can measure it. :func:`held_out_bands` makes such experiments: for each intensive
+quantity, its training values are grouped into clusters (consecutive values within
+a tolerance), and per quantity the interior cluster (neither the lowest nor the
+highest) farthest from its neighbours is held out (at most half the trips; one
+refit per quantity bounds the fit time). The residual ensemble is refitted without
+the band's trips (:func:`hybridev.learning.fitting.held_band_scores`), and the
+band's *calibration* trips, which neither the physics posterior nor any network saw,
+are scored by it: their interpolation gap to the remaining values (``h > 1`` by
+construction) and their score say how the error grows between the training values.
+Their scores join the interpolation rate's (the in-domain quantile stays that of
+the ordinary calibration trips). One rate serves every quantity, so the bands are
+used only when every quantity with room to interpolate has one (otherwise the
+fallback rate stays). Documented shortcut: the refit shares the physics posterior
+(a few global parameters, fitted on the band's training trips but never on the
+scored ones) and the input and target standardisation of the final model (as CV+
+fold ensembles share the standardisation).
+
+The rate *beyond* the conditions is not learned this way. Holding out an edge band
+needs the physics posterior refitted without it too (a posterior that saw the cold
+trips knows their heater), and one rate would then speak for every quantity: a model
+trained at 20 and 32 degC only can hold out a speed edge (where extrapolating is
+benign) but no temperature edge, and a rate learned there left its trips at -5 degC
+with 90 % intervals far too narrow (the learned rate also drops the physics posterior
+predictive floor). Beyond the data the fixed rate and that floor
+(:mod:`hybridev.learning.ood`) stay.
+
 Why not weighted conformal prediction (Tibshirani et al. 2019)? It re-weights
 the calibration scores by the likelihood ratio of the new trip's conditions;
 for a trip outside the training conditions that ratio is unbounded and the
@@ -60,10 +90,16 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain, domain_quantities
+from hybridev.learning.domain import (
+    DOMAIN_TOLERANCES,
+    INTENSIVE,
+    OOD_INFLATION_PER_UNIT,
+    TrainingDomain,
+    domain_quantities,
+)
 
-__all__ = ["FIT_LEVEL", "GAP_RATE_CAP", "GAP_RATE_FLOOR", "MAX_INFLATION", "MIN_SHIFTED_TRIPS", "GapRate",
-           "fold_gaps"]
+__all__ = ["FIT_LEVEL", "GAP_RATE_CAP", "GAP_RATE_FLOOR", "MAX_HELD_BANDS", "MAX_INFLATION",
+           "MIN_SHIFTED_TRIPS", "GapRate", "band_scores", "fold_gaps", "held_out_bands"]
 
 FIT_LEVEL = 0.9
 """Confidence level at which the rate is learned (and the in-domain quantile taken)."""
@@ -79,6 +115,10 @@ MIN_SHIFTED_TRIPS = 9
 
 MAX_INFLATION = 3.0
 """Cap of the inflation factor (as before the learned rate)."""
+
+MAX_HELD_BANDS = 3
+"""Interior bands held out at most (one refit of the residual ensemble each): one per
+intensive quantity."""
 
 
 @dataclass
@@ -252,3 +292,98 @@ def fold_gaps(trips: pd.DataFrame, fold: np.ndarray, traces=None, *,
         out[held] = dom.gap(trips.iloc[held], score_traces)
         inner[held] = dom.interior_gap(q)
     return (out, inner) if interior else out
+
+
+def held_out_bands(q: np.ndarray, max_bands: int = MAX_HELD_BANDS
+                   ) -> list[tuple[int, float, float]]:
+    """Interior bands of the training conditions to hold out: ``(quantity, low, high)``.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (n_trips, 5)
+        :func:`~hybridev.learning.domain.domain_quantities` of the training trips.
+    max_bands : int
+        At most this many bands, the widest-gap ones first.
+
+    Returns
+    -------
+    list of (int, float, float)
+        Column of ``q`` and the band's lowest and highest training value. The values
+        of each intensive quantity are grouped into clusters (consecutive values
+        within a tolerance); per quantity the interior cluster (neither the lowest nor
+        the highest) farthest (in tolerances) from its nearest neighbour (the first on
+        a tie), of at most half the trips. Empty when a quantity with room to
+        interpolate (two clusters or more) has no such band (two clusters, or a band
+        over half the trips): one rate serves every quantity, so a rate measured on the
+        others would speak for it unmeasured.
+
+    Examples
+    --------
+    >>> t = np.zeros((6, 5))
+    >>> t[:, 0] = [-5.0, -5.0, 20.0, 21.0, 32.0, 32.0]  # temperature, degC
+    >>> held_out_bands(t)  # 20-21 degC: interior, its values within 3 degC
+    [(0, 20.0, 21.0)]
+    >>> held_out_bands(t[[0, 1, 4, 5]])  # -5 and 32 degC: nothing to hold out between
+    []
+    """
+    q = np.asarray(q, float)
+    found = []
+    for j in np.flatnonzero(INTENSIVE):
+        v, tol = np.unique(q[:, j]), DOMAIN_TOLERANCES[j]
+        cut = np.flatnonzero(np.diff(v) > tol)  # a cluster ends where the next value is far
+        first, last = np.r_[0, cut + 1], np.r_[cut, v.size - 1]
+        best = None
+        for a, b in zip(first[1:-1], last[1:-1], strict=True):
+            n_in = int(((q[:, j] >= v[a]) & (q[:, j] <= v[b])).sum())
+            gap = min(v[a] - v[a - 1], v[b + 1] - v[b]) / tol
+            if n_in <= len(q) / 2 and (best is None or gap > best[0]):
+                best = (gap, (int(j), float(v[a]), float(v[b])))
+        if best is None and len(first) >= 2:
+            return []  # room to interpolate, but no band to measure it on
+        if best is not None:
+            found.append(best)
+    found.sort(key=lambda x: -x[0])  # stable: ties keep the quantity order
+    return [band for _, band in found[:max(int(max_bands), 0)]]
+
+
+def band_scores(q: np.ndarray, rest: np.ndarray, scored: np.ndarray, refit, score
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Scores of the calibration trips of held-out interior bands, and their gaps.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (n_trips, 5)
+        Domain quantities of every trip.
+    rest : numpy.ndarray of int
+        The trips the model was trained on (its training domain).
+    scored : numpy.ndarray of int
+        Trips no part of the model saw (split conformal's calibration trips).
+    refit : callable
+        ``refit(keep, band) -> refitted``: the residual ensemble refitted on the trips
+        ``keep`` (int rows, a subset of ``rest``); ``band`` its index (a seed).
+    score : callable
+        ``score(rows, refitted) -> scores``: signed normalised scores ``(y - mu) / s``
+        of the trips ``rows`` (int) under the refitted model, (len(rows),).
+
+    Returns
+    -------
+    scores, interp : numpy.ndarray, shape (m,) each
+        The scored trips of each band (:func:`held_out_bands` of ``q[rest]``; none, and
+        no refit, when they hold fewer than :data:`MIN_SHIFTED_TRIPS` scored trips),
+        concatenated, and their interpolation gap to the training values left.
+    """
+    q, rest, scored = np.asarray(q, float), np.asarray(rest, int), np.asarray(scored, int)
+    out_s, out_h = [np.zeros(0)], [np.zeros(0)]
+    bands = held_out_bands(q[rest])
+    held_of = [scored[(q[scored, j] >= lo) & (q[scored, j] <= hi)] for j, lo, hi in bands]
+    if sum(len(h) for h in held_of) < MIN_SHIFTED_TRIPS:  # too few to learn from: no refit
+        bands = []
+    for k, ((j, lo, hi), held) in enumerate(zip(bands, held_of, strict=False)):
+        keep = rest[(q[rest, j] < lo) | (q[rest, j] > hi)]
+        if not len(held):
+            continue
+        dom = TrainingDomain(values=tuple(np.unique(q[keep, c]) for c in range(q.shape[1])),
+                             feature_lo=np.zeros(1), feature_hi=np.zeros(1))
+        out_h.append(dom.interior_gap(q[held]))
+        out_s.append(np.asarray(score(held, refit(keep, k)), float))
+    return np.concatenate(out_s), np.concatenate(out_h)

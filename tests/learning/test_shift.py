@@ -6,7 +6,7 @@ import pytest
 
 from hybridev.learning.domain import OOD_INFLATION_PER_UNIT, TrainingDomain, domain_quantities
 from hybridev.learning.ood import OutOfDomainSpread
-from hybridev.learning.shift import GAP_RATE_FLOOR, GapRate, fold_gaps
+from hybridev.learning.shift import GAP_RATE_FLOOR, GapRate, band_scores, fold_gaps, held_out_bands
 
 
 def _trips(temps):
@@ -105,3 +105,79 @@ def test_a_learned_rate_widens_the_conformal_interval_without_the_raw_floor():
     assert not fixed.learned_
     wide_fixed = OutOfDomainSpread(rate=fixed).widen(a, raw, cal, 0.9)[0]
     assert wide_fixed.hi[1] - wide_fixed.lo[1] > 2 * 1.6 * 1.0
+
+
+def _design(n=300, seed=0):
+    """Domain quantities of a design of fixed conditions (speeds 40-120 km/h, three
+    temperatures), (n, 5)."""
+    rng = np.random.default_rng(seed)
+    t = pd.DataFrame({"distance_km": rng.uniform(20.0, 200.0, n),
+                      "avg_speed_kmh": rng.choice([40.0, 60.0, 80.0, 100.0, 120.0], n),
+                      "temperature_c": rng.choice([-5.0, 20.0, 32.0], n)})
+    return domain_quantities(t)[0]
+
+
+def test_held_out_bands_are_the_interior_values_farthest_from_their_neighbours():
+    q = _design()
+    # temperature: 20 degC is 12 degC (4 tolerances) from 32; speed: 60 km/h the first of
+    # three interior values 20 km/h (2.5 tolerances) from their neighbours
+    assert held_out_bands(q) == [(0, 20.0, 20.0), (1, 60.0, 60.0)]
+    assert held_out_bands(q, max_bands=1) == [(0, 20.0, 20.0)]
+    assert held_out_bands(q[q[:, 1] == 40.0]) == [(0, 20.0, 20.0)]  # one speed: no room
+    # room to interpolate temperature but no band to measure it on: none (one rate serves
+    # every quantity); two temperatures, or an interior one holding over half the trips
+    assert held_out_bands(q[q[:, 0] != 20.0]) == []
+    q[: len(q) * 2 // 3, 0] = 20.0
+    assert held_out_bands(q) == []
+
+
+def test_band_scores_refit_without_the_band_and_score_its_unseen_trips():
+    q = _design()
+    rest, scored = np.arange(0, 250), np.arange(250, 300)
+    fits = []
+
+    def refit(keep, k):
+        fits.append((k, keep))
+        return k
+
+    def score(rows, net):
+        return np.full(len(rows), 10.0 + net)
+
+    s, h = band_scores(q, rest, scored, refit, score)
+    assert [k for k, _ in fits] == [0, 1]
+    assert not np.isin(q[fits[0][1], 0], [20.0]).any()  # the band is not trained on
+    assert set(fits[0][1]) <= set(rest)
+    in_t = scored[q[scored, 0] == 20.0]
+    in_v = scored[q[scored, 1] == 60.0]
+    assert len(s) == len(in_t) + len(in_v)
+    np.testing.assert_array_equal(s, np.r_[np.full(len(in_t), 10.0), np.full(len(in_v), 11.0)])
+    # 20 degC between -5 and 32 (12 degC, 4 tolerances); 60 km/h between 40 and 80 (20
+    # km/h, 2.5 tolerances), each against the values its refit kept
+    np.testing.assert_allclose(h, np.r_[np.full(len(in_t), 4.0), np.full(len(in_v), 2.5)])
+    # the scores join the interpolation rate, against the in-domain quantile
+    base = np.random.default_rng(2).standard_normal(300)
+    r = GapRate().fit(np.r_[base, 0.9 * s / 10.0 * 3.0], np.zeros(300 + len(s)),
+                      interp=np.r_[np.zeros(300), h])
+    assert r.n_interp_ == len(s) and r.interp_rate_ > 0.0
+
+
+@pytest.mark.slow
+def test_split_conformal_fit_learns_the_interpolation_rate_from_held_out_bands():
+    from hybridev import HybridModel
+    from hybridev.physics.truth import make_dataset
+
+    data = make_dataset(300, truth="structured", seed=5)  # split conformal (>= 250 trips)
+    m = HybridModel(n_members=2, max_epochs=40, n_steps=200).fit(data, seed=0)
+    r = m.gap_rate_
+    # its calibration trips share the training conditions: only the held-out bands
+    # (20 degC, 60 km/h) give trips between training values; none beyond: fixed rate
+    assert r.n_interp_ >= 9
+    assert r.n_shifted_ == 0 and not r.learned_
+
+
+def test_bands_holding_too_few_scored_trips_are_not_refitted():
+    q = _design()
+    calls = []
+    s, h = band_scores(q, np.arange(0, 295), np.arange(295, 300),
+                       lambda keep, k: calls.append(k), lambda rows, net: np.ones(len(rows)))
+    assert calls == [] and len(s) == len(h) == 0
