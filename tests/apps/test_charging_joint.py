@@ -105,8 +105,8 @@ def test_plan_uses_the_measured_correlation_and_a_lower_one_plans_cheaper():
     z, g = _scores(0.05, 100, 20)
     model = _Model(CVPlusConformal(z, g))
     kw = dict(soc_now=0.2, tariff=tariff, charger_kw=7.0, n_samples=2000, n_eval=4000)
-    auto = plan_charging(model, sched, **kw)
-    own = plan_charging(model, sched, trip_correlation=None, **kw)
+    auto = plan_charging(model, sched, trip_correlation="auto", **kw)
+    own = plan_charging(model, sched, **kw)
     assert auto.trip_correlation == pytest.approx(model_shared_fraction(model))
     assert own.trip_correlation is None
     # the model's own joint law makes every trip move with the physics draw (corr ~0.96)

@@ -9,10 +9,10 @@ and finds the cheapest charger power per tariff slot such that
 while the SoC never exceeds ``soc_max`` (the charger stops there). The
 constraint is on the *cumulative* energy, so the samples are joint: a share of
 each trip's spread is common to all trips of a sample, so a week of trips is not
-treated as independent coin flips. :func:`plan_charging` measures that share from
-the model's calibration scores (``trip_correlation="auto"``,
-:mod:`hybridev.apps.charging.joint`); the distribution's own joint law keeps its
-physics draw and ensemble member common to all trips (``trip_correlation=None``). Schedule and tariff tables are
+treated as independent coin flips. By default the distribution's own joint law keeps its
+physics draw and ensemble member common to all trips; ``trip_correlation`` sets
+that share instead, or measures it from the model's calibration scores
+(``"auto"``, :mod:`hybridev.apps.charging.joint`). Schedule and tariff tables are
 described in :mod:`hybridev.apps.charging.schedule`, the LP/MILP formulation in
 :mod:`hybridev.apps.charging.lp`.
 
@@ -248,7 +248,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
                   n_samples: int | None = None, n_eval: int = 20000, level: float = 0.9,
                   risk_neutral: bool = False, compare: bool = True, seed=0,
                   time_limit_s: float = 30.0, margin_se: float = 1.0,
-                  soc_refine: int = 3, trip_correlation="auto") -> ChargingPlan:
+                  soc_refine: int = 3, trip_correlation=None) -> ChargingPlan:
     """Risk-aware charging plan for a vehicle described by a fitted model.
 
     Calls ``model.predict_distribution(trips)`` (trips in departure order, see
@@ -285,24 +285,28 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     soaked, and plans that way. A ``parked_min`` column in the schedule is used
     as given.
 
-    How the trips' errors co-vary (``trip_correlation``, default ``"auto"``): each
-    trip's spread is calibrated, but the share of it that is common to the trips
-    of a week (a wrong physics parameter, a wrong offset) is measured from the
-    model's own calibration scores, as their correlation between trips scored by
-    the same fitted model (:func:`hybridev.apps.charging.joint.model_shared_fraction`),
-    not taken from the posterior and ensemble spread, which overstates it (the
-    networks absorb most of what another physics draw would change). A model without
-    scores keeps its own joint law. The value used is the plan's ``trip_correlation``.
+    How the trips' errors co-vary (``trip_correlation``): by default the
+    predictive distribution's own joint law (its posterior draw and ensemble member
+    common to all trips of a sample, its noise independent per trip). With
+    ``"auto"`` the share of each trip's spread common to all trips is measured from
+    the model's own calibration scores instead, as their correlation between trips
+    scored by the same fitted model
+    (:func:`hybridev.apps.charging.joint.model_shared_fraction`). It is not the
+    default: one share for all pairs of trips cannot say that trips under the same
+    conditions (a weekend's two motorway legs) share more error than a week's mixed
+    trips, and a split-conformal fit measures its shared error once (its one model's
+    offset); on ``evaluation/charging_risk`` it made the plans' risk against the
+    truth overshoot the target in the domain. The value used is the plan's
+    ``trip_correlation``.
 
     Parameters
     ----------
     soc_refine : int
         Most re-predictions at the planned departure SoC, >= 0 (0: every trip
         at ``soc_now``, the behaviour before this option).
-    trip_correlation : "auto", float in [0, 1] or None
-        ``"auto"``: measured from the model (above); a number: that share; None:
-        the predictive distribution's own joint law (posterior draw and member
-        common to all trips, the behaviour before this option).
+    trip_correlation : None, "auto" or float in [0, 1]
+        None: the predictive distribution's own joint law; ``"auto"``: measured
+        from the model (above); a number: that share.
 
     Examples
     --------
