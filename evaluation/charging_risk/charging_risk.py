@@ -58,7 +58,16 @@ Set-up (every number in the output comes from this script):
   the start, ``soc_min`` 0.1, risks 0.05 and 0.10, ``plan_charging``
   defaults (the energies re-predicted at the planned departure SoC until the
   plan agrees with it; a row with ``soc_refine=0`` predicts every trip at
-  ``soc_now``, as before that option), and the risk-neutral plan.
+  ``soc_now``, as before that option; a row with ``trip_correlation="auto"``
+  samples the trips with the shared share of their errors measured from the
+  model's calibration scores, :mod:`hybridev.apps.charging.joint`), and the
+  risk-neutral plan.
+* How the trips' errors combine (for the risk-aware plans at 0.05): the spread
+  of the week's total and of the *binding block* (the plan's riskiest arrival
+  and the trips since the last departure planned at ``soc_max``) under the
+  model's own joint law and under the measured share, beside the spread a
+  calibrated joint law needs (the truth's aleatoric spread and the model's RMS
+  error over replicates and weeks, in quadrature).
 * Truth assessment of a plan: ``N_EVAL`` joint scenarios of the week; in each,
   every trip independently gets one of ``N_TRUTH_TRACES`` speed traces of
   seed ``300 + r`` (the truth's trace-to-trace spread, about 1 % of energy)
