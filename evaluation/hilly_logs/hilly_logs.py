@@ -119,7 +119,8 @@ def run() -> dict:
 def run_intervals() -> dict:
     """The hybrid's intervals (:mod:`hilly_intervals`), without the per-trip rows."""
     res = hilly_intervals.run()
-    folds = [{k: v for k, v in f.items() if k in ("fold", "n_train", "n_test", "q90", "gate")}
+    folds = [{k: v for k, v in f.items() if k in ("fold", "n_train", "n_test", "q90", "gate",
+                                                          "cv_fold_physics_mape_pct")}
              for f in res["folds"]]
     return {"n_days": res["n_days"], "summary": res["summary"], "folds": folds}
 

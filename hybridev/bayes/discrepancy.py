@@ -165,7 +165,8 @@ class TermDiscrepancy:
 
     @classmethod
     def fit(cls, stats: PhysicsStats, params, energy_kwh, scale_kwh, *,
-            noise_dof: float | None = None) -> TermDiscrepancy:
+            noise_dof: float | None = None, noise_rel: float | None = None
+            ) -> TermDiscrepancy:
         """Fit the term multipliers on measured trips.
 
         Parameters
@@ -182,6 +183,10 @@ class TermDiscrepancy:
             Student-t degrees of freedom of the residual (the posterior's
             ``noise_dof``): the fit is then iteratively reweighted (see the module
             docstring, "Robust to odd trips"); ``None``: least squares.
+        noise_rel : float, optional
+            Scale of the t on the relative residual ``E* / E_p - 1`` (the posterior's
+            within-day noise); ``None``: the residuals' median absolute value times
+            1.4826 (each round).
 
         Returns
         -------
@@ -193,8 +198,9 @@ class TermDiscrepancy:
         if y.shape != (len(t),) or s.shape != (len(t),) or np.any(~(s > 0)):
             raise ValueError(f"energy_kwh and scale_kwh need shape ({len(t)},) and "
                              "scale_kwh > 0")
-        if noise_dof is not None and not (np.isfinite(noise_dof) and noise_dof > 0):
-            raise ValueError(f"noise_dof={noise_dof!r} is outside the allowed range (0, inf)")
+        for name, v in (("noise_dof", noise_dof), ("noise_rel", noise_rel)):
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v!r} is outside the allowed range (0, inf)")
         z = t / s[:, None]
         r = (y - t.sum(axis=1)) / s
         upper = regen_upper_bounds(params)
@@ -209,8 +215,9 @@ class TermDiscrepancy:
         if noise_dof is not None:
             for _ in range(_ROBUST_ITER):  # iteratively reweighted: the t's trip weights
                 e = r - za @ delta
-                sc = 1.4826 * float(np.median(np.abs(e)))
-                if not sc > 0:
+                sc = (1.4826 * float(np.median(np.abs(e))) if noise_rel is None
+                      else noise_rel * np.abs(t.sum(axis=1)) / s)  # relative -> row units
+                if not np.all(sc > 0):
                     break
                 w_new = (noise_dof + 1.0) / (noise_dof + (e / sc) ** 2)
                 done = float(np.max(np.abs(w_new - w))) < 1e-3
