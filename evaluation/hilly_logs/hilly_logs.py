@@ -15,7 +15,10 @@ MAPE of the truth energy itself against the measured one), the trips treated as 
 and the data-quality block. An ablation at 5 s drops the estimate of the stop-and-go a
 coarse log hides (``LoggedTraces.hidden_pke_j_per_kg``). The 90 % intervals of
 ``HybridModel`` defaults on 5 s logs (45 days), against the reviewer baselines'
-conformal intervals, come from ``hilly_intervals.py`` (its docstring). Writes ``hilly_logs.md`` and
+conformal intervals, come from ``hilly_intervals.py`` (its docstring); why the CV+
+fold physics behind those intervals scored worse than the deployed physics (a term
+discrepancy fitted by least squares, not the warm-started chains) is
+``fold_physics.py``'s study. Writes ``hilly_logs.md`` and
 ``.json`` to ``--out`` (default: this folder).
 """
 
