@@ -38,16 +38,17 @@ and their posterior covariance gives draws for the predictive spread.
 * **Robust to odd trips.** With ``noise_dof`` (the Student-t degrees of freedom of
   the posterior's likelihood, :class:`hybridev.bayes.priors.PhysicsPrior`), the
   fit is iteratively reweighted as the likelihood is: each trip's row gets the
-  t weight ``(nu + 1) / (nu + (e_i / c_i)^2)`` of its residual ``e_i`` after the
-  re-weighting, ``c_i`` the posterior's within-day noise scale on the relative
-  residual (``noise_rel``; without it the residuals' median absolute value times
-  1.4826), until no weight moves (Lange, Little & Taylor 1989).
-  :class:`hybridev.learning.physics_stage.PhysicsStage` passes the posterior's
-  ``noise_dof`` and scale. With least squares, two flagged downhill trips of the
-  synthetic hilly 5 s logs (relative residuals +0.6 and +0.8) pulled the term
-  weights so far that the physics with the discrepancy did worse on new days than
-  without it, and so did every CV+ fold physics that held those trips, which
-  widened the conformal intervals (``evaluation/hilly_logs``, interval section).
+  t weight ``(nu + 1) / (nu + (e_i / c)^2)`` of its residual ``e_i`` after the
+  re-weighting, ``c`` the residuals' median absolute value times 1.4826 (or, given
+  ``noise_rel``, that relative noise scale), until no weight moves (Lange, Little &
+  Taylor 1989). :class:`hybridev.learning.physics_stage.PhysicsStage` passes the
+  posterior's ``noise_dof`` (the residuals' own scale: what the discrepancy
+  leaves). With least squares, two flagged downhill trips of the synthetic hilly
+  5 s logs (relative residuals +0.6 and +0.8) pulled the term weights so far that
+  the physics with the discrepancy did worse on new days than without it, and so
+  did the CV+ fold physics fitted on those trips, which widened the conformal
+  intervals (``evaluation/hilly_logs``: ``fold_physics.md`` and the interval
+  section of ``hilly_logs.md``).
 * Terms the fitting trips never excite (no heating in a summer log, no
   regeneration in a synthetic set without braking) keep weight 1: the
   discrepancy does not extrapolate a term it has not seen.
