@@ -184,9 +184,10 @@ class PhysicsStage:
                                    np.maximum(scale, 1e-9))
 
     # -- transform ---------------------------------------------------------------------
-    def stats(self, valid: pd.DataFrame, traces=None):
-        """Physics statistics of validated trips as the posterior builds them (CV+ folds share them)."""
-        return self.posterior_.stats_for(valid, traces)
+    def stats(self, valid: pd.DataFrame, traces=None, columns=None):
+        """Physics statistics of validated trips as the posterior builds them (CV+ folds
+        share them); ``columns``: their columns as the validation read them."""
+        return self.posterior_.stats_for(valid, traces, columns=columns)
 
     def _energies(self, stats, n_draws: int, seed: int, physics=None):
         """Energies ``(1 + n_draws, n_trips)`` with the discrepancy at full weight, and a
@@ -230,7 +231,7 @@ class PhysicsStage:
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if self.posterior_ is not None:
             valid, cols = validate_prediction_columns(trips)
-            stats = self.stats(valid, traces)
+            stats = self.stats(valid, traces, cols)
             pairs = [self._energies(stats, n_draws, seed, p) for p in physics]
             vmax = stats.max_speed_kmh
             if stats.marginalised:
