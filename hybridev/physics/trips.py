@@ -330,16 +330,35 @@ def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.Da
             or table.attrs or table.columns.dtype != "str"
             or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())):
         return table.assign(**columns)  # replaced columns or metadata: the general path
-    parts, names, values = [table], list(columns), list(columns.values())
+    parts, names, values = [table], tuple(columns), list(columns.values())
     start = 0
     for i in range(1, len(values) + 1):  # one 2-D block per run of columns of one dtype
         if i == len(values) or values[i].dtype != values[start].dtype:
             block = (values[start][:, None] if i - start == 1
                      else np.stack(values[start:i], axis=1))
             parts.append(pd.DataFrame(block, index=table.index, copy=False,
-                                      columns=_column_index(tuple(names[start:i]))))
+                                      columns=_column_index(names[start:i])))
             start = i
-    return pd.concat(parts, axis=1)
+    # the joined column labels of string indexes cost more than the rest of the concat:
+    # concatenated unlabelled, then labelled with the (cached) joined labels
+    out = pd.concat(parts, axis=1, ignore_index=True)
+    out.columns = _joined_columns(table.columns, names)
+    return out
+
+
+_JOINED: dict = {}
+
+
+def _joined_columns(first: pd.Index, names: tuple[str, ...]) -> pd.Index:
+    """``first.append(pd.Index(names))``, cached by the identity of ``first`` (the cache
+    holds ``first``, so its id is not reused while the entry lives; at most 64 entries)."""
+    key = (id(first), names)
+    hit = _JOINED.get(key)
+    if hit is None or hit[0] is not first:
+        if len(_JOINED) >= 64:
+            _JOINED.clear()
+        hit = _JOINED[key] = (first, first.append(_column_index(names)))
+    return hit[1]
 
 
 @dataclass(frozen=True)
