@@ -350,14 +350,19 @@ _JOINED: dict = {}
 
 
 def _joined_columns(first: pd.Index, names: tuple[str, ...]) -> pd.Index:
-    """``first.append(pd.Index(names))``, cached by the identity of ``first`` (the cache
-    holds ``first``, so its id is not reused while the entry lives; at most 64 entries)."""
-    key = (id(first), names)
+    """``first.append(pd.Index(names))`` for an unnamed ``str`` index ``first``.
+
+    Cached by the identity of ``first``'s values (an index is immutable; the shallow
+    copies of one table share them), which the cache holds, so their id is not reused
+    while the entry lives (at most 64 entries).
+    """
+    values = getattr(first, "_data", first)
+    key = (id(values), names)
     hit = _JOINED.get(key)
-    if hit is None or hit[0] is not first:
+    if hit is None or hit[0] is not values:
         if len(_JOINED) >= 64:
             _JOINED.clear()
-        hit = _JOINED[key] = (first, first.append(_column_index(names)))
+        hit = _JOINED[key] = (values, first.append(_column_index(names)))
     return hit[1]
 
 
