@@ -206,7 +206,10 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
     out = table.assign(**conv) if conv else table.copy(deep=False)
     if "mode" in out.columns:
         m = out["mode"]
-        cells = m.to_numpy(dtype=object)
+        # pd.NA (a "string" column's empty cell) as NaN: it cannot be compared
+        cells = m.to_numpy(dtype=object, **({"na_value": np.nan}
+                                            if getattr(m.dtype, "na_value", None) is pd.NA
+                                            else {}))
         arrays["mode"] = cells
         known = np.zeros(len(cells), dtype=bool)
         for name in modes:  # the common case: every mode is a known one
