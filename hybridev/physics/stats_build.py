@@ -591,8 +591,8 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
                     moving_s=moving, parked_s=None if parked is None else parked[trip],
                     heating_grid_kw=heat_grid,
-                    regen_cap_kw=_regen_threshold(veh, _profile_consts(list(modes), len(trip))[1],
-                                                  len(trip))[0],
+                    regen_cap_kw=np.full(len(trip), float(regen_limit_kw(veh))),  # as
+                    # _regen_threshold's limit, which does not depend on the profiles
                     capped_s=capped_s, capped_fs=capped_fs)
 
 
