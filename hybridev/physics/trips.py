@@ -325,12 +325,12 @@ def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.Da
     >>> append_columns(t, {"b": np.array([3.0, 4.0])}).columns.tolist()
     ['a', 'b']
     """
-    n = len(table)
-    if (any(c in table.columns for c in columns) or table.columns.name is not None
-            or table.attrs or table.columns.dtype != "str"
-            or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())):
+    n, labels, names = len(table), table.columns, tuple(columns)
+    if (labels.name is not None or table.attrs or labels.dtype != "str"
+            or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())
+            or not _joined_columns(labels, names).is_unique):  # (cached: no per-name test)
         return table.assign(**columns)  # replaced columns or metadata: the general path
-    parts, names, values = [table], tuple(columns), list(columns.values())
+    parts, values = [table], list(columns.values())
     start = 0
     for i in range(1, len(values) + 1):  # one 2-D block per run of columns of one dtype
         if i == len(values) or values[i].dtype != values[start].dtype:
@@ -342,7 +342,7 @@ def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.Da
     # the joined column labels of string indexes cost more than the rest of the concat:
     # concatenated unlabelled, then labelled with the (cached) joined labels
     out = pd.concat(parts, axis=1, ignore_index=True)
-    out.columns = _joined_columns(table.columns, names)
+    out.columns = _joined_columns(labels, names)
     return out
 
 
