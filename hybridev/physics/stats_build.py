@@ -480,10 +480,9 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         already holds the driving style).
     columns : dict of str to numpy.ndarray, optional
         Columns of ``trips`` already read as arrays, each (n_trips,): the numeric
-        ones as float, ``mode`` as object (``None`` where unknown), e.g. those of the
-        validation (:func:`hybridev.learning.inputs.validate_prediction_columns`).
-        Read instead of the table's (a column lookup costs more than one trip's
-        arithmetic); the others come from ``trips``.
+        ones as float, ``mode`` as object (``None`` where unknown), e.g. those the
+        validation of a prediction read. Used instead of the table's (a column
+        lookup costs more than one trip's arithmetic); the others come from ``trips``.
 
     Returns
     -------
