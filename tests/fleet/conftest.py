@@ -7,9 +7,14 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def client():
-    """``LocalCluster(processes=True, n_workers=2, threads_per_worker=1)`` and its client."""
+    """``LocalCluster(processes=True, n_workers=2, threads_per_worker=1)`` and its client.
+
+    One per test module, closed at its end: starting one costs about 1 CPU-second, while
+    an idle cluster (its two worker processes and the scheduler's threads here) costs
+    about 0.1 CPU-second per second for as long as it lives, which for a session-wide
+    cluster was the rest of the suite (30 CPU-seconds and more on a loaded machine)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         from hybridev.fleet.cluster import local_cluster
