@@ -109,23 +109,44 @@ def test_no_import_cycles():
     assert cycles == [], f"import cycles: {cycles}"
 
 
-@pytest.mark.parametrize("layer", ["core", "physics", "data", "bayes", "metrics"])
-def test_lower_layers_never_import_torch(layer):
-    """Physics (and everything below learning) runs without torch: checked in a fresh process."""
-    mods = sorted(m for m in GRAPH if _layer(m) == layer)
+TORCH_FREE = ("core", "physics", "metrics", "data", "bayes")
+"""The layers below learning, in the order of :data:`RANK`."""
+
+
+@pytest.fixture(scope="module")
+def layer_imports():
+    """``{layer: (torch modules loaded, hybridev modules above the layer loaded)}``.
+
+    One fresh process imports the layers' modules in :data:`TORCH_FREE`'s order (up the
+    ranks) and records after each layer what is loaded: a module that loads torch or a
+    module above it is caught at its own layer, since everything loaded before is from
+    the layers below (whose own checks come first). One interpreter start, not five.
+    """
     # ``import hybridev`` itself loads the physics layer (its names are top-level), so
-    # what counts is what the layer's modules load beyond that.
-    code = ("import sys, importlib, hybridev\n"
+    # what counts is what the layers' modules load beyond that.
+    plan = {layer: ([m for m in sorted(GRAPH) if _layer(m) == layer],
+                    [k for k, r in RANK.items() if r > RANK[layer]]) for layer in TORCH_FREE}
+    code = ("import sys, importlib, json, hybridev\n"
             "base = set(sys.modules)\n"
-            f"for m in {mods!r}: importlib.import_module(m)\n"
-            "bad = sorted(k for k in sys.modules if k == 'torch' or k.startswith('torch.'))\n"
-            "above = sorted(k for k in set(sys.modules) - base if k.startswith('hybridev.') and "
-            f"k.split('.')[1] in {[k for k, r in RANK.items() if r > RANK[layer]]!r})\n"
-            "print(len(bad), above)\n")
+            "out = {}\n"
+            f"for layer, (mods, higher) in {plan!r}.items():\n"
+            "    for m in mods: importlib.import_module(m)\n"
+            "    bad = sorted(k for k in sys.modules if k == 'torch' or k.startswith('torch.'))\n"
+            "    above = sorted(k for k in set(sys.modules) - base if k.startswith('hybridev.')\n"
+            "                   and k.split('.')[1] in higher)\n"
+            "    out[layer] = [len(bad), above]\n"
+            "print(json.dumps(out))\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    n_torch, above = res.stdout.split(" ", 1)
-    assert n_torch == "0", f"{layer} imports torch"
-    assert above.strip() == "[]", f"{layer} loads modules above it: {above}"
+    return __import__("json").loads(res.stdout)
+
+
+@pytest.mark.parametrize("layer", TORCH_FREE)
+def test_lower_layers_never_import_torch(layer, layer_imports):
+    """Physics (and everything below learning) runs without torch: checked in a fresh process."""
+    assert sorted(RANK, key=RANK.get)[:len(TORCH_FREE)] == sorted(TORCH_FREE, key=RANK.get)
+    n_torch, above = layer_imports[layer]
+    assert n_torch == 0, f"{layer} imports torch"
+    assert above == [], f"{layer} loads modules above it: {above}"
 
 
 PUBLIC = sorted("""

@@ -1,15 +1,16 @@
 """Fault injection: a process killed at every step of every writer leaves old or new, never neither.
 
-Each case runs a small writer in a subprocess three times: a first run writes
-the old output; a second run is killed (SIGINT, SIGTERM or SIGKILL, sent by the
-process to itself at a named step through ``HYBRIDEV_FAULT``: no timing); a
-third run writes again. After the kill the user's path holds the complete old
+Each case runs a small writer in a subprocess: the old output, written once per
+module by a first run, is copied in (its reference new output too, see ``_made``);
+a second run is killed (SIGINT, SIGTERM or SIGKILL, sent by the process to itself
+at a named step through ``HYBRIDEV_FAULT``: no timing); a third run writes again. After the kill the user's path holds the complete old
 or the complete new output (for a merged folder after SIGKILL past its journal:
 the journal is there, and the next run completes the new output); after the
 third run it holds the new output and nothing else is left beside it.
 """
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -78,24 +79,47 @@ def _user_files(snap):
     return {k: v for k, v in (snap or {}).items() if k != MANIFEST_FILE}
 
 
-def _check_case(tmp_path, kind, step, sig, no_exchange=False):
-    parent = tmp_path / "out"
-    target = parent / ("p.csv" if kind == "file" else "res")
-    if kind == "merge_dir":
-        parent.mkdir()
-        target.mkdir()
-        (target / "mine.txt").write_text("the user's")  # kept by every run
-    assert _run(kind, target, "1").returncode == 0
-    old = snapshot(target)
-    new_proc_ref = tmp_path / "ref" / target.name
-    if kind == "merge_dir":
-        new_proc_ref.mkdir(parents=True)
-        (new_proc_ref / "mine.txt").write_text("the user's")
-    assert _run(kind, new_proc_ref, "1").returncode == 0
-    assert _run(kind, new_proc_ref, "2").returncode == 0
-    new = snapshot(new_proc_ref)
-    assert _user_files(old) != _user_files(new)
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """Per writer kind, the once-written old output and the reference new one (see _made)."""
+    return tmp_path_factory.mktemp("made"), {}
 
+
+def _made(made, kind):
+    """``(folder holding the old output, old snapshot, new snapshot)`` of ``kind``.
+
+    Written once per module by real runs: the old output (run "1"), and the new output
+    of a second run over an old one (runs "1" then "2"), as every case expects it.
+    Each case starts from a byte copy of the old output's folder (manifests and the
+    file register name files relative to their folder), so it costs two runs, the
+    killed one and the next one, instead of four.
+    """
+    root, cache = made
+    if kind not in cache:
+        home = root / kind
+        parent = home / "out"
+        target = parent / ("p.csv" if kind == "file" else "res")
+        if kind == "merge_dir":
+            target.mkdir(parents=True)
+            (target / "mine.txt").write_text("the user's")  # kept by every run
+        assert _run(kind, target, "1").returncode == 0
+        ref = home / "ref" / target.name
+        if kind == "merge_dir":
+            ref.mkdir(parents=True)
+            (ref / "mine.txt").write_text("the user's")
+        assert _run(kind, ref, "1").returncode == 0
+        assert _run(kind, ref, "2").returncode == 0
+        cache[kind] = parent, snapshot(target), snapshot(ref)
+    return cache[kind]
+
+
+def _check_case(made, tmp_path, kind, step, sig, no_exchange=False):
+    old_parent, old, new = _made(made, kind)
+    parent = tmp_path / "out"
+    shutil.copytree(old_parent, parent)
+    target = parent / ("p.csv" if kind == "file" else "res")
+    assert snapshot(target) == old
+    assert _user_files(old) != _user_files(new)
     r = _run(kind, target, "2", fault=f"{step}:{sig}", no_exchange=no_exchange)
     assert r.returncode != 0, (step, sig, r.stderr)  # the fault fired
     after = snapshot(target)
@@ -119,27 +143,27 @@ def _check_case(tmp_path, kind, step, sig, no_exchange=False):
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", [s for s in swap.STEPS["dir"] if s != "dir.old_moved"])
-def test_folder_replacement_is_old_or_new_at_every_step(tmp_path, step, sig):
-    _check_case(tmp_path, "model_dir", step, sig)
+def test_folder_replacement_is_old_or_new_at_every_step(made, tmp_path, step, sig):
+    _check_case(made, tmp_path, "model_dir", step, sig)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["dir"])
-def test_folder_replacement_without_exchange_recovers(tmp_path, step, sig):
-    _check_case(tmp_path, "dir", step, sig, no_exchange=True)
+def test_folder_replacement_without_exchange_recovers(made, tmp_path, step, sig):
+    _check_case(made, tmp_path, "dir", step, sig, no_exchange=True)
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["file"])
-def test_file_replacement_is_old_or_new_at_every_step(tmp_path, step, sig):
-    _check_case(tmp_path, "file", step, sig)
+def test_file_replacement_is_old_or_new_at_every_step(made, tmp_path, step, sig):
+    _check_case(made, tmp_path, "file", step, sig)
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["merge"])
-def test_merged_folder_is_old_or_new_or_completed_from_its_journal(tmp_path, step, sig):
-    _check_case(tmp_path, "merge_dir", step, sig)
+def test_merged_folder_is_old_or_new_or_completed_from_its_journal(made, tmp_path, step, sig):
+    _check_case(made, tmp_path, "merge_dir", step, sig)
 
 
 def test_recovery_says_what_it_did(tmp_path):

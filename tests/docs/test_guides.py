@@ -8,8 +8,9 @@ there and nothing is left behind). Blocks in other languages are not run: ``text
 (output, diagrams) and ``sh``, kept for the installation commands, which must not run
 here (they create environments and download packages).
 
-* Default suite: the model fits are made small (:data:`FAST`: 2 networks, 15 epochs),
-  which changes the numbers, not the commands; every substitution must match.
+* Default suite: the model fits are made small (:data:`FAST`: 2 networks, 15 epochs;
+  :data:`PAGE_FAST`: fewer trips where a page's fit is dear), which changes the
+  numbers, not the commands; every substitution must match.
 * Slow: the pages exactly as written, and the fleet page (a dask cluster).
 
 ``hybridev`` and the python blocks run in one warm server per test process
@@ -40,6 +41,12 @@ FAST = (  # (pattern, replacement): smaller fits for the default suite
     (r"HybridModel\(\)", "HybridModel(n_members=2, max_epochs=15)"),
     (r"HybridModel\(car\)", "HybridModel(car, n_members=2, max_epochs=15)"),
 )
+PAGE_FAST = {  # page: further (pattern, replacement), smaller data where the page's fit is dear
+    # the README's coast-down car: its posterior runs about 19,000 MCMC steps on 250 trips
+    # (22 CPU-seconds), about 5,700 on 50; the code is the same, the numbers smaller
+    "../README.md": ((r"make_dataset\(300,", "make_dataset(60,"),
+                     (r"iloc\[:250\]", "iloc[:50]"), (r"iloc\[250:\]", "iloc[50:]")),
+}
 _BLOCK = re.compile(r"^```(\w+)\n(.*?)^```\s*$", re.M | re.S)
 
 
@@ -68,8 +75,8 @@ def page_script(page: str) -> str:
     return "\n".join(parts) + "\n"
 
 
-def fast(script: str) -> str:
-    for pattern, repl in FAST:
+def fast(script: str, page: str | None = None) -> str:
+    for pattern, repl in (*FAST, *PAGE_FAST.get(page, ())):
         script = re.sub(pattern, repl, script, flags=re.M)
     return script
 
@@ -106,6 +113,9 @@ def test_every_page_has_runnable_blocks_and_fast_substitutions_match():
     script = "\n".join(page_script(p) for p in (*PAGES, *SLOW_PAGES))
     for pattern, _ in FAST:
         assert re.search(pattern, script, flags=re.M), pattern
+    for page, subs in PAGE_FAST.items():
+        for pattern, _ in subs:
+            assert re.search(pattern, page_script(page), flags=re.M), (page, pattern)
 
 
 def test_page_script_groups_python_runs():
@@ -115,7 +125,7 @@ def test_page_script_groups_python_runs():
 
 @pytest.mark.parametrize("page", PAGES)
 def test_page_runs(page, tmp_path, warm_cli):
-    out = run_page(fast(page_script(page)), tmp_path, warm=warm_cli)
+    out = run_page(fast(page_script(page), page), tmp_path, warm=warm_cli)
     if page == "how-to/range.md":
         band = [float(v) for v in re.findall(r"q[159]0\s+([0-9.]+) km", out)]
         assert len(band) == 3 and band[0] <= band[1] <= band[2]
@@ -130,7 +140,7 @@ def test_page_runs(page, tmp_path, warm_cli):
 @pytest.mark.parametrize("page", SLOW_PAGES)
 def test_slow_page_runs(page, tmp_path):
     pytest.importorskip("dask.dataframe")
-    out = run_page(fast(page_script(page)), tmp_path)
+    out = run_page(fast(page_script(page), page), tmp_path)
     assert "energy_kwh_pred" in out
     assert list(tmp_path.glob("tmp/fleet-report/fleet_report.html"))
 
