@@ -414,7 +414,7 @@ def warn_out_of_domain(n_out: int, n_trips: int, *, stacklevel: int = 3,
                if reasons else "")
         warnings.warn(
             f"{n_out} of {n_trips} {what} lie outside the conditions the model was trained "
-            "on (temperature, speed, grade, or a missing mode / logged trace it was "
-            f"trained with){why}: see the in_domain and domain_score columns; "
-            "their intervals come from the physics posterior predictive, widened",
+            "on (temperature, speed or grade beyond the training values, or a missing "
+            f"input it was trained with){why}: see the in_domain and domain_score "
+            "columns; their intervals widen with the distance to the data",
             OutOfDomainWarning, stacklevel=stacklevel)
