@@ -63,6 +63,10 @@ class ChargingPlan:
         Calibration and evaluation sample counts.
     neutral : ChargingPlan or None
         The risk-neutral plan (mean energies), evaluated on the same samples.
+    trip_correlation : float or None
+        Share of each trip's energy variance common to the trips of a sample
+        (:mod:`hybridev.apps.charging.joint`); None: the predictive distribution's
+        own joint law.
     """
 
     plan: pd.DataFrame
@@ -79,6 +83,7 @@ class ChargingPlan:
     n_samples: int
     n_eval: int
     neutral: ChargingPlan | None = None
+    trip_correlation: float | None = None
 
     def summary(self) -> str:
         """A few lines for people: energy, cost, achieved risk, risk-neutral comparison."""
@@ -91,7 +96,9 @@ class ChargingPlan:
             f"(expected {self.expected_cost:.2f} with the charger stopping at soc_max)",
             f"  P(SoC < soc_min on some arrival) = {self.risk_achieved:.4f} "
             f"+/- {self.risk_achieved_se:.4f} on fresh samples"
-            + ("" if self.risk is None else f" (target {self.risk:g})"),
+            + ("" if self.risk is None else f" (target {self.risk:g})")
+            + ("" if self.trip_correlation is None else
+               f"; trips' shared error share {self.trip_correlation:.3f}"),
         ]
         if self.neutral is not None:
             lines.append(f"  risk-neutral plan (mean energies): cost {self.neutral.cost:.2f}, "

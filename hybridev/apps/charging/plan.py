@@ -7,9 +7,12 @@ and finds the cheapest charger power per tariff slot such that
 ``P(SoC < soc_min at some point of the schedule) <= risk``
 
 while the SoC never exceeds ``soc_max`` (the charger stops there). The
-constraint is on the *cumulative* energy: joint samples keep the physics
-draw and ensemble member common to all trips of a sample, so a week of trips
-is not treated as independent coin flips. Schedule and tariff tables are
+constraint is on the *cumulative* energy, so the samples are joint: a share of
+each trip's spread is common to all trips of a sample, so a week of trips is not
+treated as independent coin flips. By default the distribution's own joint law keeps its
+physics draw and ensemble member common to all trips; ``trip_correlation`` sets
+that share instead, or measures it from the model's calibration scores
+(``"auto"``, :mod:`hybridev.apps.charging.joint`). Schedule and tariff tables are
 described in :mod:`hybridev.apps.charging.schedule`, the LP/MILP formulation in
 :mod:`hybridev.apps.charging.lp`.
 
@@ -28,6 +31,15 @@ import numpy as np
 import pandas as pd
 
 from hybridev.apps.charging.assess import ChargingPlan, assess_plan, with_trip_inputs
+from hybridev.apps.charging.evaluate import evaluate_charging
+from hybridev.apps.charging.joint import (
+    check_correlation,
+    check_count,
+    check_distribution,
+    model_shared_fraction,
+    sample_streams,
+    scenarios,
+)
 from hybridev.apps.charging.lp import (
     VIOLATION_TOL_KWH,
     block_capacity_kwh,
@@ -49,35 +61,6 @@ METHODS = ("quantile", "scenario")
 SOC_REFINE_TOL = 0.01
 """Departure-SoC change below which :func:`plan_charging` stops re-predicting, fraction."""
 DEFAULT_SAMPLES = {"quantile": 4000, "scenario": 300}
-
-
-def _streams(seed) -> tuple[np.random.Generator, np.random.Generator]:
-    from hybridev.core.checks import check_seed
-
-    cal, ev = np.random.default_rng(check_seed(seed)).spawn(2)
-    return cal, ev
-
-
-def _samples(dist: EnergyDistribution, n: int, rng, perm) -> np.ndarray:
-    return dist.sample(n, rng)[:, perm]
-
-
-def _check_dist(dist, problem: ChargingProblem) -> None:
-    if not isinstance(dist, EnergyDistribution):
-        raise ValueError(f"dist must be an EnergyDistribution; got {type(dist).__name__}")
-    if dist.n_trips != problem.n_trips:
-        raise ValueError(f"the distribution has {dist.n_trips} trips but the schedule has "
-                         f"{problem.n_trips}")
-
-
-def _count(name: str, value, lo: int) -> int:
-    try:
-        ok = not isinstance(value, bool) and int(value) == value and value >= lo
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise ValueError(f"{name}={value!r} is outside the allowed range [{lo}, inf) (integers)")
-    return int(value)
 
 
 def _infeasible(problem: ChargingProblem, cal: np.ndarray, risk: float, allowed: float) -> None:
@@ -116,8 +99,10 @@ def _infeasible(problem: ChargingProblem, cal: np.ndarray, risk: float, allowed:
 
 
 def _plan(problem: ChargingProblem, dist: EnergyDistribution, perm, *, method, n_samples,
-          n_eval, level, risk_neutral, compare, seed, time_limit_s, margin_se) -> ChargingPlan:
-    _check_dist(dist, problem)
+          n_eval, level, risk_neutral, compare, seed, time_limit_s, margin_se,
+          trip_correlation=None) -> ChargingPlan:
+    check_distribution(dist, problem)
+    rho = check_correlation(trip_correlation)
     if method not in METHODS:
         raise ValueError(f"method={method!r}; allowed: {list(METHODS)}")
     try:
@@ -126,12 +111,12 @@ def _plan(problem: ChargingProblem, dist: EnergyDistribution, perm, *, method, n
         margin = float("nan")
     if not (np.isfinite(margin) and margin >= 0):
         raise ValueError(f"margin_se={margin_se!r} is outside the allowed range [0, inf)")
-    n_samples = _count("n_samples", DEFAULT_SAMPLES[method] if n_samples is None else n_samples,
+    n_samples = check_count("n_samples", DEFAULT_SAMPLES[method] if n_samples is None else n_samples,
                        100)
-    n_eval = _count("n_eval", n_eval, 100)
-    cal_rng, ev_rng = _streams(seed)
-    cal = _samples(dist, n_samples, cal_rng, perm)
-    ev = _samples(dist, n_eval, ev_rng, perm)
+    n_eval = check_count("n_eval", n_eval, 100)
+    cal_rng, ev_rng = sample_streams(seed)
+    cal = scenarios(dist, n_samples, cal_rng, perm, rho)
+    ev = scenarios(dist, n_eval, ev_rng, perm, rho)
     mean = dist.mean()[perm]
     pairs = build_pairs(problem, cal, mean)
     kw = dict(level=level, cal=cal, n_samples=n_samples)
@@ -141,8 +126,8 @@ def _plan(problem: ChargingProblem, dist: EnergyDistribution, perm, *, method, n
         x, y, msg = solve_lp(problem, pairs, req)
         if (req > pairs.cap_kwh + 1e-6).any():
             msg += "; mean energy exceeds what the charger can add (capped at full power)"
-        return assess_plan(problem, x, y, ev, mean, method="mean", status=msg, risk=None,
-                           gamma=None, **kw)
+        return replace(assess_plan(problem, x, y, ev, mean, method="mean", status=msg,
+                                   risk=None, gamma=None, **kw), trip_correlation=rho)
 
     if risk_neutral:
         _infeasible(problem, mean[None, :], 0.0, 0.0)
@@ -160,8 +145,9 @@ def _plan(problem: ChargingProblem, dist: EnergyDistribution, perm, *, method, n
         forced = violations(problem, block_capacity_kwh(problem), cal).any(axis=1)
         sol = solve_scenario(problem, pairs, cal, allowed, forced=forced,
                              time_limit_s=time_limit_s)
-    out = assess_plan(problem, sol.charge_kw, sol.block_kwh, ev, mean, method=method,
-                      status=sol.status, risk=risk, gamma=sol.gamma, **kw)
+    out = replace(assess_plan(problem, sol.charge_kw, sol.block_kwh, ev, mean, method=method,
+                              status=sol.status, risk=risk, gamma=sol.gamma, **kw),
+                  trip_correlation=rho)
     if compare:
         out = replace(out, neutral=neutral_plan())
     return out
@@ -176,7 +162,8 @@ def plan_charging_from_distribution(dist: EnergyDistribution, capacity_kwh: floa
                                     n_eval: int = 20000, level: float = 0.9,
                                     risk_neutral: bool = False, compare: bool = True,
                                     seed=0, time_limit_s: float = 30.0,
-                                    margin_se: float = 1.0) -> ChargingPlan:
+                                    margin_se: float = 1.0,
+                                    trip_correlation: float | None = None) -> ChargingPlan:
     """Risk-aware charging plan from a predictive energy distribution.
 
     Parameters
@@ -218,6 +205,10 @@ def plan_charging_from_distribution(dist: EnergyDistribution, capacity_kwh: floa
         samples (choosing the cheapest plan that passes on its own samples
         is optimistic; one standard error keeps the fresh-sample risk near
         or below the target).
+    trip_correlation : float in [0, 1] or None
+        Share of each trip's energy variance common to all trips of a scenario
+        (:func:`hybridev.apps.charging.joint.joint_samples`); None samples the
+        distribution's own joint law (:meth:`EnergyDistribution.sample`).
 
     Returns
     -------
@@ -247,7 +238,8 @@ def plan_charging_from_distribution(dist: EnergyDistribution, capacity_kwh: floa
                             soc_max=soc_max, charger_kw=charger_kw, risk=risk)
     return _plan(problem, dist, problem.order, method=method, n_samples=n_samples,
                  n_eval=n_eval, level=level, risk_neutral=risk_neutral, compare=compare,
-                 seed=seed, time_limit_s=time_limit_s, margin_se=margin_se)
+                 seed=seed, time_limit_s=time_limit_s, margin_se=margin_se,
+                 trip_correlation=trip_correlation)
 
 
 def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.DataFrame,
@@ -256,7 +248,7 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
                   n_samples: int | None = None, n_eval: int = 20000, level: float = 0.9,
                   risk_neutral: bool = False, compare: bool = True, seed=0,
                   time_limit_s: float = 30.0, margin_se: float = 1.0,
-                  soc_refine: int = 3) -> ChargingPlan:
+                  soc_refine: int = 3, trip_correlation=None) -> ChargingPlan:
     """Risk-aware charging plan for a vehicle described by a fitted model.
 
     Calls ``model.predict_distribution(trips)`` (trips in departure order, see
@@ -293,11 +285,28 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     soaked, and plans that way. A ``parked_min`` column in the schedule is used
     as given.
 
+    How the trips' errors co-vary (``trip_correlation``): by default the
+    predictive distribution's own joint law (its posterior draw and ensemble member
+    common to all trips of a sample, its noise independent per trip). With
+    ``"auto"`` the share of each trip's spread common to all trips is measured from
+    the model's own calibration scores instead, as their correlation between trips
+    scored by the same fitted model
+    (:func:`hybridev.apps.charging.joint.model_shared_fraction`). It is not the
+    default: one share for all pairs of trips cannot say that trips under the same
+    conditions (a weekend's two motorway legs) share more error than a week's mixed
+    trips, and a split-conformal fit measures its shared error once (its one model's
+    offset); on ``evaluation/charging_risk`` it made the plans' risk against the
+    truth overshoot the target in the domain. The value used is the plan's
+    ``trip_correlation``.
+
     Parameters
     ----------
     soc_refine : int
         Most re-predictions at the planned departure SoC, >= 0 (0: every trip
         at ``soc_now``, the behaviour before this option).
+    trip_correlation : None, "auto" or float in [0, 1]
+        None: the predictive distribution's own joint law; ``"auto"``: measured
+        from the model (above); a number: that share.
 
     Examples
     --------
@@ -319,11 +328,13 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
     problem = parse_problem(schedule, tariff, soc_now=soc_now, capacity_kwh=capacity,
                             charge_efficiency=charge_efficiency, soc_min=soc_min,
                             soc_max=soc_max, charger_kw=charger_kw, risk=risk)
-    n_refine = _count("soc_refine", soc_refine, 0)
+    n_refine = check_count("soc_refine", soc_refine, 0)
+    rho = (model_shared_fraction(model) if isinstance(trip_correlation, str)
+           and trip_correlation == "auto" else check_correlation(trip_correlation))
     table = model_trip_table(problem, parking=_saw_parking(model))
     kw = dict(method=method, n_samples=n_samples, n_eval=n_eval, level=level,
               risk_neutral=risk_neutral, compare=compare, seed=seed,
-              time_limit_s=time_limit_s, margin_se=margin_se)
+              time_limit_s=time_limit_s, margin_se=margin_se, trip_correlation=rho)
     out = _plan(problem, _predict(model, table, level), np.arange(problem.n_trips), **kw)
     for _ in range(0 if "soc_initial" in problem.trips.columns else n_refine):
         planned = out.trips["soc_departure_pred"].to_numpy(float)
@@ -335,67 +346,6 @@ def plan_charging(model, schedule: pd.DataFrame, *, soc_now: float, tariff: pd.D
             dist = _predict(model, table, level)
         out = _plan(problem, dist, np.arange(problem.n_trips), **kw)
     return with_trip_inputs(out, model, table)
-
-
-def evaluate_charging(charge_kw, dist, capacity_kwh: float,
-                      schedule: pd.DataFrame, *, soc_now: float, tariff: pd.DataFrame,
-                      charge_efficiency: float = 0.9, soc_min: float = 0.1,
-                      soc_max: float = 1.0, level: float = 0.9, n_eval: int = 20000,
-                      seed=0) -> ChargingPlan:
-    """Monte Carlo assessment of a given charging plan (e.g. a hand-made one).
-
-    ``charge_kw`` has one value per tariff slot (kW, >= 0, 0 when not parked).
-    ``dist`` is an :class:`EnergyDistribution` (``n_eval`` joint samples are
-    drawn; with the same ``seed`` they are those of
-    :func:`plan_charging_from_distribution`, so plans compare on equal terms)
-    or an array of joint energy scenarios, shape (n_scenarios >= 100,
-    n_trips), kWh, in the schedule's row order (e.g. from a simulator or a
-    data-generating truth; ``n_eval`` and ``seed`` are then not used).
-
-    Examples
-    --------
-    >>> import numpy as np, pandas as pd
-    >>> tariff = pd.DataFrame({"start": np.arange(4.0), "price_per_kwh": 0.3})
-    >>> sched = pd.DataFrame({"departure": [3.0], "distance_km": [50.0],
-    ...     "avg_speed_kmh": [50.0], "mode": "eco", "temperature_c": 20.0})
-    >>> dist = EnergyDistribution(np.array([[6.0]]), np.zeros((1, 1)), np.ones((1, 1)))
-    >>> ev = evaluate_charging([0, 0, 0, 0], dist, 60.0, sched, soc_now=0.2, tariff=tariff,
-    ...                        n_eval=4000)
-    >>> round(ev.risk_achieved, 1)  # 6 kWh above soc_min, a 6 +- 1 kWh trip: half fail
-    0.5
-    """
-    problem = parse_problem(schedule, tariff, soc_now=soc_now, capacity_kwh=capacity_kwh,
-                            charge_efficiency=charge_efficiency, soc_min=soc_min,
-                            soc_max=soc_max)
-    if isinstance(dist, EnergyDistribution):
-        _check_dist(dist, problem)
-    else:
-        scen = np.asarray(dist, float)
-        if scen.ndim != 2 or scen.shape[1] != problem.n_trips or len(scen) < 100 or not np.all(
-                np.isfinite(scen)):
-            raise ValueError(f"dist must be an EnergyDistribution or finite energy scenarios of "
-                             f"shape (>= 100, {problem.n_trips}) (one column per trip); got "
-                             f"{type(dist).__name__} of shape {np.shape(dist)}")
-    x = np.asarray(charge_kw, float)
-    if x.shape != (problem.n_slots,) or not np.all(np.isfinite(x)) or (x < 0).any():
-        raise ValueError(f"charge_kw must be {problem.n_slots} finite values >= 0 (one per "
-                         f"tariff slot); got shape {x.shape}")
-    bad = (x > 0) & ~problem.parked
-    if bad.any():
-        j = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"charge_kw={x[j]!r} in slot {problem.slot_start.iloc[j]} while the "
-                         "vehicle is on a trip; allowed 0")
-    n_eval = _count("n_eval", n_eval, 100)
-    if isinstance(dist, EnergyDistribution):
-        ev = _samples(dist, n_eval, _streams(seed)[1], problem.order)
-        mean = dist.mean()[problem.order]
-    else:
-        ev = scen[:, problem.order]
-        mean = ev.mean(axis=0)
-    y = problem.charge_efficiency * problem.slot_h * np.bincount(
-        problem.block, weights=x, minlength=problem.n_trips + 1)[: problem.n_trips]
-    return assess_plan(problem, x, y, ev, mean, level=level, method="given",
-                   status="evaluated", risk=None, gamma=None, cal=None, n_samples=0)
 
 
 def _saw_parking(model) -> bool:
