@@ -181,7 +181,7 @@ class PhysicsStage:
         e_p = energy_from_stats(stats, med)[0]
         scale = residual_scale(e_p, measured["distance_km"].to_numpy(float), self.relative)
         return TermDiscrepancy.fit(stats, med, measured["energy_kwh"].to_numpy(float),
-                                   np.maximum(scale, 1e-9))
+                                   np.maximum(scale, 1e-9), noise_dof=post.noise_dof)
 
     # -- transform ---------------------------------------------------------------------
     def stats(self, valid: pd.DataFrame, traces=None):

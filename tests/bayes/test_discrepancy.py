@@ -118,3 +118,37 @@ def test_sample_with_the_cached_factor_is_multivariate_normal_bit_for_bit():
         want = np.tile(d.weights, (5, 1))
         want[:, active] += r2.multivariate_normal(np.zeros(k), d.cov, size=5, method="eigh")
         assert np.array_equal(d.sample(5, r1), np.clip(want, 0.0, d.upper))
+
+
+@pytest.mark.parametrize("noise_rel", [None, 0.01])
+def test_robust_fit_ignores_odd_trips_that_drag_least_squares(stats, noise_rel):
+    """Planted weights (auxiliary x 1.6, inertia/grade x 0.8, 1 % noise) and 10 of 300
+    trips measured 80 % high (wrong SoC readings, on the trips that weigh most on the
+    auxiliary term): with the likelihood's Student-t (``noise_dof=4``) the fit recovers
+    the planted weights (the auxiliary one, which few trips pin, to 0.2) and the clean
+    trips' error;
+    least squares (``noise_dof=None``, the old fit) is dragged off them. The t's scale:
+    the residuals' (``noise_rel=None``) or the planted noise (as the posterior gives it)."""
+    t = term_energies(stats)
+    true_w = np.ones(N_TERMS)
+    true_w[8], true_w[3] = 1.6, 0.8
+    rng = np.random.default_rng(0)
+    y = (t @ true_w) * (1 + 0.01 * rng.standard_normal(len(t)))
+    odd = np.argsort(-t[:, 8] / t.sum(axis=1))[:10]  # the trips most of whose energy is aux
+    y[odd] *= 1.8
+    clean = np.setdiff1d(np.arange(len(y)), odd)
+    scale = np.abs(t.sum(axis=1))
+    robust = TermDiscrepancy.fit(stats, None, y, scale, noise_dof=4.0, noise_rel=noise_rel)
+    plain = TermDiscrepancy.fit(stats, None, y, scale)
+
+    def clean_mape(d):
+        return np.mean(np.abs(energy_from_stats(stats, term_weights=d.weights)[clean]
+                              / y[clean] - 1))
+    assert robust.weights[8] == pytest.approx(1.6, abs=0.2)  # least squares: about 9
+    assert robust.weights[3] == pytest.approx(0.8, abs=0.1)
+    assert clean_mape(robust) < 0.015
+    assert clean_mape(plain) > 2 * clean_mape(robust)
+    with pytest.raises(ValueError, match="noise_dof"):
+        TermDiscrepancy.fit(stats, None, y, scale, noise_dof=0.0)
+    with pytest.raises(ValueError, match="noise_rel"):
+        TermDiscrepancy.fit(stats, None, y, scale, noise_dof=4.0, noise_rel=-1.0)
