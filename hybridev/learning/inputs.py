@@ -54,14 +54,15 @@ def validate_prediction_columns(trips: pd.DataFrame
         :func:`~hybridev.learning.steps.table_columns` reads them, but from the
         validation's own arrays (each column is looked up once: slow on small tables).
     """
+    meta: dict = {}
     good, _, arrays = _check_table(trips, required=_TRIP_REQUIRED, rules=TRIP_RULES,
-                                   mode_required=False, what="trips")
+                                   mode_required=False, what="trips", _meta=meta)
     modes = normalize_modes(arrays.get("mode"), len(good))  # raise mode: good's own cells
-    present = set(good.columns)
     cols = {c: arrays[c] if c in arrays else good[c].to_numpy(float)
-            for c in ARRAY_COLUMNS if c in present}
+            for c in ARRAY_COLUMNS if c in good.columns}
     cols["mode"] = modes
-    good["mode"] = modes  # good is the validation's own (shallow, copy-on-write) copy
+    if not meta.get("mode_normal"):  # else the column holds these modes already
+        good["mode"] = modes  # good is the validation's own (shallow, copy-on-write) copy
     return good, cols
 
 

@@ -61,6 +61,30 @@ def _sample_median(post: PhysicsPosterior) -> np.ndarray:
     return cached[1]
 
 
+def _draw_params(post: PhysicsPosterior, disc, n_draws: int, seed: int):
+    """``(params, term_weights)`` of the posterior median and ``n_draws`` draws seeded by
+    ``seed`` (term weights None without a discrepancy ``disc``), read-only.
+
+    A function of the learned state, ``n_draws`` and ``seed`` only, so the last one is
+    cached on ``post`` (keyed on its samples and ``disc``, as :func:`_sample_median`):
+    repeated predictions with one seed draw them once.
+    """
+    key = (post.samples, disc, getattr(disc, "weights", None), n_draws, seed)
+    cached = post.__dict__.get("_draw_params")
+    if cached is not None and all(a is b for a, b in zip(cached[0][:3], key[:3], strict=True)) \
+            and cached[0][3:] == key[3:]:
+        return cached[1]
+    med = _sample_median(post)
+    rng = np.random.default_rng(seed)
+    draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
+    params = post.as_params(np.vstack([med, draws]))
+    weights = None if disc is None else np.vstack([disc.weights, disc.sample(n_draws, rng)])
+    for a in (*params.values(), *([] if weights is None else [weights])):
+        a.flags.writeable = False
+    post._draw_params = (key, (params, weights))
+    return params, weights
+
+
 class PhysicsStage:
     """Vehicle physics, with a posterior over its parameters and a discrepancy stage.
 
@@ -184,21 +208,18 @@ class PhysicsStage:
                                    np.maximum(scale, 1e-9), noise_dof=post.noise_dof)
 
     # -- transform ---------------------------------------------------------------------
-    def stats(self, valid: pd.DataFrame, traces=None):
-        """Physics statistics of validated trips as the posterior builds them (CV+ folds share them)."""
-        return self.posterior_.stats_for(valid, traces)
+    def stats(self, valid: pd.DataFrame, traces=None, columns=None):
+        """Physics statistics of validated trips as the posterior builds them (CV+ folds
+        share them); ``columns``: their columns as the validation read them."""
+        return self.posterior_.stats_for(valid, traces, columns=columns)
 
     def _energies(self, stats, n_draws: int, seed: int, physics=None):
         """Energies ``(1 + n_draws, n_trips)`` with the discrepancy at full weight, and a
         callable giving them without it (None without a discrepancy)."""
         post, disc = physics or (self.posterior_, self.discrepancy_)
-        med = _sample_median(post)
-        rng = np.random.default_rng(seed)
-        draws = post.sample(n_draws, rng) if n_draws else np.empty((0, med.size))
-        params = post.as_params(np.vstack([med, draws]))
+        params, weights = _draw_params(post, disc, int(n_draws), int(seed))
         if disc is None:
             return energy_from_stats(stats, params), None
-        weights = np.vstack([disc.weights, disc.sample(n_draws, rng)])
         return (energy_from_stats(stats, params, term_weights=weights),
                 functools.partial(energy_from_stats, stats, params))
 
@@ -230,7 +251,7 @@ class PhysicsStage:
             raise ValueError(f"trips must be a pandas DataFrame; got {type(trips).__name__}")
         if self.posterior_ is not None:
             valid, cols = validate_prediction_columns(trips)
-            stats = self.stats(valid, traces)
+            stats = self.stats(valid, traces, cols)
             pairs = [self._energies(stats, n_draws, seed, p) for p in physics]
             vmax = stats.max_speed_kmh
             if stats.marginalised:

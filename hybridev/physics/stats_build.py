@@ -452,7 +452,8 @@ def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                traces: LoggedTraces | None = None, n_steps: int = 1000, seed: int = 0,
-               missing_mode: str | DrivingProfile = "marginalize") -> PhysicsStats:
+               missing_mode: str | DrivingProfile = "marginalize",
+               columns: dict[str, np.ndarray] | None = None) -> PhysicsStats:
     """Statistics of every trip of a (measured-)trip table.
 
     Trips whose ``trip_id`` has a logged trace use it (:func:`stats_from_logs`);
@@ -477,6 +478,11 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
         ``"marginalize"``, an unlabelled trip *with a logged trace* gets one
         row with :data:`~hybridev.physics.params.LOGGED_PROFILE` (its trace
         already holds the driving style).
+    columns : dict of str to numpy.ndarray, optional
+        Columns of ``trips`` already read as arrays, each (n_trips,): the numeric
+        ones as float, ``mode`` as object (``None`` where unknown), e.g. those the
+        validation of a prediction read. Used instead of the table's (a column
+        lookup costs more than one trip's arithmetic); the others come from ``trips``.
 
     Returns
     -------
@@ -493,8 +499,14 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     """
     veh = vehicle or VehicleParams()
     n = len(trips)
+    have = columns or {}
+
+    def col(name: str) -> np.ndarray:  # a float column, read once
+        return have[name] if name in have else trips[name].to_numpy(float)
+
     # object cells; known: not missing (None, NaN, NA) and not "" (numpy: no per-row pandas)
-    mode = (trips["mode"].to_numpy(object).copy() if "mode" in trips.columns
+    mode = (have["mode"].copy() if "mode" in have
+            else trips["mode"].to_numpy(object).copy() if "mode" in trips.columns
             else np.full(n, None, dtype=object))
     known = ~pd.isna(mode)
     known[known] = mode[known] != ""
@@ -520,12 +532,14 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
     alt_arr[:] = alts
     modes[~kn] = alt_arr[k[~kn]]
     log_w = np.where(kn, 0.0, -np.log(n_alt))
-    temp = trips["temperature_c"].to_numpy(float)
+    temp = col("temperature_c")
     soc0 = np.full(n, np.nan)
-    if "soc_initial" in trips.columns:
-        col = trips["soc_initial"]  # float64 (validated tables): no to_numeric Series
-        soc0 = (col.to_numpy(float) if col.dtype == np.float64
-                else pd.to_numeric(col, errors="coerce").to_numpy(float)).copy()
+    if "soc_initial" in have:
+        soc0 = np.array(have["soc_initial"], dtype=float)
+    elif "soc_initial" in trips.columns:
+        c = trips["soc_initial"]  # float64 (validated tables): no to_numeric Series
+        soc0 = (c.to_numpy(float) if c.dtype == np.float64
+                else pd.to_numeric(c, errors="coerce").to_numpy(float)).copy()
     capped_s = np.zeros(len(trip))
     capped_fs = np.zeros(len(trip))
     climate = np.asarray(hvac_power_kw(temp[trip], veh), dtype=float).copy()
@@ -563,21 +577,21 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                      + (sl.hvac_kw - sl.cooling_kw)[src, None])
             heat_grid[rl] = np.where(np.isfinite(g), g, (sl.hvac_kw - sl.cooling_kw)[src, None])
     if (~rl).any():
-        cols = {"distance_km": trips["distance_km"].to_numpy(float)[trip[~rl]],
-                "avg_speed_kmh": trips["avg_speed_kmh"].to_numpy(float)[trip[~rl]],
+        cols = {"distance_km": col("distance_km")[trip[~rl]],
+                "avg_speed_kmh": col("avg_speed_kmh")[trip[~rl]],
                 "mode": modes[~rl], "trip_id": keys[trip[~rl]]}
-        if "grade_pct" in trips.columns:
-            cols["grade_pct"] = trips["grade_pct"].to_numpy(float)[trip[~rl]]
+        if "grade_pct" in have or "grade_pct" in trips.columns:
+            cols["grade_pct"] = col("grade_pct")[trip[~rl]]
         _synthetic_rows(cols, np.flatnonzero(~rl), veh, n_steps, seed, soc0[trip[~rl]],
                         sums, duration, moving, vmax, (capped_s, capped_fs))
-    parked = parked_seconds(trips)
+    parked = have["parked_min"] * 60.0 if "parked_min" in have else parked_seconds(trips)
     return _assemble([sums[f"{c}_pos"] for c in _SUMS], [sums[f"{c}_neg"] for c in _SUMS],
                     duration, temp[trip], modes, veh, trip=trip, log_weight=log_w,
                     n_trips=n, max_speed_kmh=vmax, climate_kw=climate, cooling_kw=cooling,
                     moving_s=moving, parked_s=None if parked is None else parked[trip],
                     heating_grid_kw=heat_grid,
-                    regen_cap_kw=_regen_threshold(veh, _profile_consts(list(modes), len(trip))[1],
-                                                  len(trip))[0],
+                    regen_cap_kw=np.full(len(trip), float(regen_limit_kw(veh))),  # as
+                    # _regen_threshold's limit, which does not depend on the profiles
                     capped_s=capped_s, capped_fs=capped_fs)
 
 

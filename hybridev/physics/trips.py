@@ -325,21 +325,45 @@ def append_columns(table: pd.DataFrame, columns: dict[str, np.ndarray]) -> pd.Da
     >>> append_columns(t, {"b": np.array([3.0, 4.0])}).columns.tolist()
     ['a', 'b']
     """
-    n = len(table)
-    if (any(c in table.columns for c in columns) or table.columns.name is not None
-            or table.attrs or table.columns.dtype != "str"
-            or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())):
+    n, labels, names = len(table), table.columns, tuple(columns)
+    if (labels.name is not None or table.attrs or labels.dtype != "str"
+            or not all(isinstance(v, np.ndarray) and v.shape == (n,) for v in columns.values())
+            or not _joined_columns(labels, names).is_unique):  # (cached: no per-name test)
         return table.assign(**columns)  # replaced columns or metadata: the general path
-    parts, names, values = [table], list(columns), list(columns.values())
+    parts, values = [table], list(columns.values())
     start = 0
     for i in range(1, len(values) + 1):  # one 2-D block per run of columns of one dtype
         if i == len(values) or values[i].dtype != values[start].dtype:
             block = (values[start][:, None] if i - start == 1
                      else np.stack(values[start:i], axis=1))
             parts.append(pd.DataFrame(block, index=table.index, copy=False,
-                                      columns=_column_index(tuple(names[start:i]))))
+                                      columns=_column_index(names[start:i])))
             start = i
-    return pd.concat(parts, axis=1)
+    # the joined column labels of string indexes cost more than the rest of the concat:
+    # concatenated unlabelled, then labelled with the (cached) joined labels
+    out = pd.concat(parts, axis=1, ignore_index=True)
+    out.columns = _joined_columns(labels, names)
+    return out
+
+
+_JOINED: dict = {}
+
+
+def _joined_columns(first: pd.Index, names: tuple[str, ...]) -> pd.Index:
+    """``first.append(pd.Index(names))`` for an unnamed ``str`` index ``first``.
+
+    Cached by the identity of ``first``'s values (an index is immutable; the shallow
+    copies of one table share them), which the cache holds, so their id is not reused
+    while the entry lives (at most 64 entries).
+    """
+    values = getattr(first, "_data", first)
+    key = (id(values), names)
+    hit = _JOINED.get(key)
+    if hit is None or hit[0] is not values:
+        if len(_JOINED) >= 64:
+            _JOINED.clear()
+        hit = _JOINED[key] = (values, first.append(_column_index(names)))
+    return hit[1]
 
 
 @dataclass(frozen=True)

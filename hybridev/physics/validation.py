@@ -9,6 +9,7 @@ rows are reported and counted, never silently dropped).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,7 +135,7 @@ def check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[s
 
 def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[str, FieldRule],
                  modes: tuple[str, ...] | None = None, mode_required: bool = True,
-                 on_error: str = "raise", what: str = "trips"
+                 on_error: str = "raise", what: str = "trips", _meta: dict | None = None
                  ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, np.ndarray]]:
     """:func:`check_table`, plus the checked columns as arrays.
 
@@ -142,6 +143,9 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
     ``"mode"`` (when present) to its cells (object), for every row of
     ``table``: in ``"raise"`` mode these are the columns of ``good``, so
     callers need not look the columns up again (slow on small tables).
+    ``_meta`` (a dict) receives ``"mode_normal"``: whether every ``mode`` cell is an
+    allowed mode in a column of the dtype that setting those cells gives (so
+    setting the normalised modes would change nothing).
     """
     if on_error not in ("raise", "collect"):
         raise ValueError(f"on_error={on_error!r}; allowed: 'raise', 'collect'")
@@ -186,8 +190,12 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
         if field not in out.columns:
             continue
         raw = out[field]
-        x = _numeric(raw, field, what)
-        miss = raw.isna().to_numpy() if rule.missing_ok else None
+        if raw.dtype == np.float64:  # numbers already: NaN is the only empty cell
+            x = raw.to_numpy()
+            miss = np.isnan(x) if rule.missing_ok else None
+        else:
+            x = _numeric(raw, field, what)
+            miss = raw.isna().to_numpy() if rule.missing_ok else None
         report(field, rule.bad_mask(x, miss), lambda raw=raw: raw.to_numpy(dtype=object),
                rule.describe() + (f" ({rule.hint})" if rule.hint else ""))
         if raw.dtype != np.float64:  # float64 columns are kept as they are
@@ -198,11 +206,16 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
     out = table.assign(**conv) if conv else table.copy(deep=False)
     if "mode" in out.columns:
         m = out["mode"]
-        cells = m.to_numpy(dtype=object)
+        # pd.NA (a "string" column's empty cell) as NaN: it cannot be compared
+        cells = m.to_numpy(dtype=object, **({"na_value": np.nan}
+                                            if getattr(m.dtype, "na_value", None) is pd.NA
+                                            else {}))
         arrays["mode"] = cells
         known = np.zeros(len(cells), dtype=bool)
         for name in modes:  # the common case: every mode is a known one
             known |= cells == name
+        if _meta is not None:  # the cells as they are make a normalised mode column
+            _meta["mode_normal"] = bool(known.all()) and m.dtype == _str_dtype()
         if not known.all():
             present = m.notna() & (m.astype(str).str.len() > 0)
             ok = m.isin(modes).to_numpy() | (~present.to_numpy() & (not mode_required))
@@ -216,6 +229,12 @@ def _check_table(table: pd.DataFrame, *, required: tuple[str, ...], rules: dict[
         raise ValueError(f"{what}: all {len(out)} rows were rejected; first reason: "
                          f"{rejected['reason'].iloc[0]}")
     return good, rejected, arrays
+
+
+@functools.cache
+def _str_dtype():
+    """The dtype pandas gives a column set from an object array of strings."""
+    return pd.Series(np.array(["eco"], dtype=object)).dtype
 
 
 def _close_names(missing, columns) -> str:

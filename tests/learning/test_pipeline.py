@@ -185,3 +185,20 @@ def test_single_trip_rows_equal_the_batch_rows(model):
                 pd.testing.assert_frame_equal(got.drop(columns="mode"),
                                               want.drop(columns="mode"), rtol=1e-11,
                                               atol=1e-12)
+
+
+def test_single_trip_fast_paths_equal_the_general_ones_exactly(model):
+    """One trip through the fast paths (mode column kept as it is, output columns joined
+    in one concat) gives exactly the table of the general paths: a named column index
+    (``DataFrame.assign`` for the output) and an object ``mode`` column (set again by
+    the validation) change nothing but the index name."""
+    trips = _trips()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(len(trips)):
+            one = trips.iloc[[i]]
+            general = (one.astype({"mode": object}) if "mode" in one
+                       else one).rename_axis(columns="field")
+            for fn in (lambda t: model.predict_interval(t, 0.8, seed=4), model.predict):
+                want = fn(general).rename_axis(columns=None)
+                pd.testing.assert_frame_equal(fn(one), want, check_exact=True)

@@ -220,3 +220,23 @@ def test_a_trip_without_trip_id_does_not_depend_on_the_other_rows():
     assert (k == content_keys(t.assign(distance_km=1.0, mode="eco"))).all()
     assert len(np.unique(k)) == t["avg_speed_kmh"].nunique()
     np.testing.assert_array_equal(trace_keys(make_trips(3, seed=0)), [0, 1, 2])
+
+
+@pytest.mark.parametrize("index", [None, [7, 3, 5]])
+def test_append_columns_equals_assign(index):
+    """One concat with the joined labels gives ``assign``'s table exactly, again with the
+    cached labels, and a replaced column takes the general path."""
+    t = make_trips(3, seed=0)
+    if index is not None:
+        t.index = index
+    new = {"x": np.array([1.0, 2.0, 3.0]), "y": np.array([0.5, 0.5, 1.5]),
+           "ok": np.array([True, False, True]), "z": np.array([4.0, 5.0, 6.0])}
+    for _ in range(2):
+        pd.testing.assert_frame_equal(trips_mod.append_columns(t, new), t.assign(**new),
+                                      check_exact=True)
+    again = {"distance_km": np.array([9.0, 8.0, 7.0]), **new}
+    pd.testing.assert_frame_equal(trips_mod.append_columns(t, again), t.assign(**again),
+                                  check_exact=True)
+    other = t.rename(columns={"hour": "hour_of_day"})  # other labels: not the cached ones
+    pd.testing.assert_frame_equal(trips_mod.append_columns(other, new), other.assign(**new),
+                                  check_exact=True)
