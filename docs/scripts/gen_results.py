@@ -43,7 +43,6 @@ STUDIES = {  # page -> (study folder, write-up, title)
     "uncertainty": ("uncertainty", "UNCERTAINTY.md", "Uncertainty on synthetic trips"),
     "paper": ("paper_experiments", "REPRODUCTION.md", "The paper's experiments"),
     "physics": ("physics_reproduction", "physics_reproduction.md", "Physics reproduction"),
-    "trace_gap": ("trace_gap", "trace_gap.md", "Trips without their logged trace"),
     "fleet_borrowing": ("fleet_borrowing", "fleet_borrowing.md", "Fleet borrowing"),
     "hilly_logs": ("hilly_logs", "hilly_logs.md", "Hilly terrain and coarse logs"),
     "planned_trips": ("planned_trips", "RESULTS.md", "Planned trips on a real car"),
