@@ -217,10 +217,11 @@ class TermDiscrepancy:
         w = np.ones(len(y))
         delta, cov, lam = _weighted_fit(za, r, w, hi)
         if noise_dof is not None:
+            fixed = None if noise_rel is None else noise_rel * np.abs(t.sum(axis=1)) / s
             for _ in range(_ROBUST_ITER):  # iteratively reweighted: the t's trip weights
                 e = r - za @ delta
-                sc = (1.4826 * float(np.median(np.abs(e))) if noise_rel is None
-                      else noise_rel * np.abs(t.sum(axis=1)) / s)  # relative -> row units
+                sc = (1.4826 * float(np.median(np.abs(e))) if fixed is None
+                      else fixed)  # a given relative scale, in row units
                 if not np.all(sc > 0):
                     break
                 w_new = (noise_dof + 1.0) / (noise_dof + (e / sc) ** 2)

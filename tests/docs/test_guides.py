@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from warm_cli import hybridev_bin
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
@@ -83,14 +84,7 @@ def fast(script: str, page: str | None = None) -> str:
 
 def run_page(script: str, workdir: Path, timeout: int = 1200, warm=None) -> str:
     """Run ``script``; ``hybridev`` is a fresh interpreter per call, or ``warm``'s client."""
-    bin_dir = workdir / "bin"
-    bin_dir.mkdir()
-    if warm is None:
-        shim = bin_dir / "hybridev"
-        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
-        shim.chmod(0o755)
-    else:
-        warm.write_shim(bin_dir)
+    bin_dir = hybridev_bin(workdir, warm)
     python = sys.executable if warm is None else str(warm.write_python(bin_dir))
     tmp = workdir / "tmp"
     tmp.mkdir()

@@ -19,12 +19,12 @@ import json
 import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from warm_cli import hybridev_bin
 
 ROOT = Path(__file__).resolve().parents[2]
 GUIDE = ROOT / "docs" / "own_car.md"
@@ -45,14 +45,7 @@ def run_guide(workdir: Path, data: Path, script: str, warm=None) -> tuple[Path, 
     ``hybridev`` is a fresh interpreter per call, or the client of the warm server
     ``warm`` (``warm_cli.py``: the same commands without re-importing torch each time).
     """
-    bin_dir = workdir / "bin"
-    bin_dir.mkdir()
-    if warm is None:
-        shim = bin_dir / "hybridev"
-        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
-        shim.chmod(0o755)
-    else:
-        warm.write_shim(bin_dir)
+    bin_dir = hybridev_bin(workdir, warm)
     env = dict(os.environ, DATA=str(data), PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
                MPLBACKEND="Agg", TMPDIR=str(workdir / "tmp"))

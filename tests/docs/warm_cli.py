@@ -32,7 +32,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["WarmCli", "client_main", "serve"]
+__all__ = ["WarmCli", "client_main", "hybridev_bin", "serve"]
 
 _MAX_MSG = 1 << 22
 
@@ -134,6 +134,20 @@ def client_main(sock_path: str, argv: list[str], python: bool = False) -> int:
     answer = _recv_all(conn)
     conn.close()
     return int(answer) if answer else 1
+
+
+def hybridev_bin(workdir: Path, warm: WarmCli | None = None) -> Path:
+    """``workdir/bin`` holding a ``hybridev`` command for ``PATH``: a fresh interpreter per
+    call, or the client of the warm server ``warm``."""
+    bin_dir = workdir / "bin"
+    bin_dir.mkdir()
+    if warm is None:
+        shim = bin_dir / "hybridev"
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m hybridev.cli "$@"\n')
+        shim.chmod(0o755)
+    else:
+        warm.write_shim(bin_dir)
+    return bin_dir
 
 
 class WarmCli:
