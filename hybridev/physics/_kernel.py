@@ -210,7 +210,7 @@ def synthetic_sums(distance_km, avg_speed_kmh, profile, keys: np.ndarray, grade_
         Fixes the sign split.
     brake_limit_w : numpy.ndarray, shape (n,), W, optional
         Braking wheel power beyond which regeneration runs at its limit
-        (``stats_build._regen_threshold``, before the SoC derating); ``inf`` or None: no limit.
+        (``stats_parts._regen_threshold``, before the SoC derating); ``inf`` or None: no limit.
     derate : tuple of numpy.ndarray (n,), optional
         ``(a, b)``: interval ``k``'s limit is ``brake_limit_w`` times
         ``clip(a + b (k - 1/2) / n_steps, 0, 1)`` (:func:`hybridev.physics.derate.derate_line`);

@@ -18,156 +18,30 @@ sums, capped ones only their duration and their derated duration
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pandas as pd
 
 from hybridev.physics._kernel import synthetic_sums
 from hybridev.physics.climate import hvac_power_kw
-from hybridev.physics.derate import derate_line, soc_drop_estimate
-from hybridev.physics.forces import MOVING_MPS, _moving_steps, regen_limit_kw
-from hybridev.physics.kinematics import _check_steps, profile_table, trace_keys
+from hybridev.physics.forces import _moving_steps, regen_limit_kw
+from hybridev.physics.kinematics import _check_steps, trace_keys
 from hybridev.physics.params import LOGGED_PROFILE, PROFILES, DrivingProfile, VehicleParams
 from hybridev.physics.stats import _J_PER_KWH, _SUMS, HEATING_OFFSET_GRID_K, PhysicsStats
-from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
+from hybridev.physics.stats_logs import stats_from_logs
+from hybridev.physics.stats_parts import (
+    _assemble,
+    _derate,
+    _profile_consts,
+    _regen_threshold,
+)
+from hybridev.physics.thermal import climate_split_kw
 from hybridev.physics.traces import LoggedTraces
 from hybridev.physics.trips import _blocks, _check_seed
 
 __all__ = ["parked_seconds", "stats_from_logs", "stats_from_traces", "trip_stats"]
 
 
-_RAMP_STEP_S = 1.0
-"""Longest step (s) at which the wheel power of a logged trace is evaluated: a coarser
-log's straight speed ramps are evaluated every second (:meth:`LoggedTraces.refined`)."""
-
 _SUB = 32  # trips per block of _trace_sums (its working arrays stay in the L2 cache)
-
-
-def _components(vm, acc, cos_th, sin_th, dt, veh: VehicleParams):
-    """Per-interval (roll, aero, lin, rest) energies and the wheel energy ``P_w dt``, kWh."""
-    m, g = veh.mass_kg, veh.gravity_mps2
-    vdt = vm * dt / _J_PER_KWH
-    roll = (m * g) * cos_th * vdt
-    aero = (0.5 * veh.air_density_kg_m3) * vm * vm * vdt
-    lin = vm * vdt
-    rest = (m * g * sin_th + m * acc) * vdt
-    pw = (veh.rolling_resistance_coef * roll + veh.drag_area_m2 * aero
-          + veh.linear_drag_n_per_mps * lin + rest)
-    return (roll, aero, lin, rest), pw
-
-
-def _regen_threshold(veh: VehicleParams, eta_r_profile, n: int):
-    """(limit kW, braking wheel-power threshold W) per row before the SoC derating, each (n,).
-
-    ``inf`` without a limit (paper preset) or with zero regen efficiency.
-    """
-    cap = np.full(n, float(regen_limit_kw(veh)))
-    eta = np.broadcast_to(np.asarray(eta_r_profile, dtype=float), (n,))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        thr = np.where(eta > 0, cap * 1e3 / np.where(eta > 0, eta, 1.0), np.inf)
-    return cap, np.where(np.isfinite(cap), thr, np.inf)
-
-
-def _derate(veh: VehicleParams, soc, thr, distance_m, duration_s):
-    """Line ``(a, b)`` (n,) of each trip's derating factor ``clip(a + b x, 0, 1)``.
-
-    ``a = 1, b = 0`` (none) without a start SoC or without a finite limit.
-    """
-    n = len(thr)
-    s = np.full(n, np.nan) if soc is None else np.broadcast_to(np.asarray(soc, float), (n,))
-    s = np.where(np.isfinite(thr), s, np.nan)
-    return derate_line(veh, s, soc_drop_estimate(veh, distance_m, duration_s))
-
-
-def _profile_consts(profile, n: int):
-    t = profile_table(profile, n, ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
-    return t["efficiency_multiplier"], t["regen_efficiency"], t["aux_kw"]
-
-
-def _offset_vehicles(veh: VehicleParams) -> list[VehicleParams]:
-    """``veh`` with its heating onset moved by each of :data:`HEATING_OFFSET_GRID_K`.
-
-    Built without ``VehicleParams``' range checks (an offset of the grid may lie
-    outside the range a user may set; the thermal functions only read it).
-    """
-    out = []
-    for g in HEATING_OFFSET_GRID_K:
-        v = copy.copy(veh)
-        object.__setattr__(v, "heating_offset_k", veh.heating_offset_k + float(g))
-        out.append(v)
-    return out
-
-
-def _heating_grid_kw(temperature_c: np.ndarray, vehicles) -> np.ndarray:
-    """Steady heating power at each offset vehicle, shape (n, n_grid), kW."""
-    return np.stack([climate_split_kw(temperature_c, v)[0] for v in vehicles], axis=-1)
-
-
-def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=None,
-              log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
-              start_temperature_c=None, cooling_kw=None, moving_s=None,
-              parked_s=None, heating_grid_kw=None, offset_grid: bool = True,
-              regen_cap_kw=None, capped_s=None, capped_fs=None) -> PhysicsStats:
-    """Statistics from the sums; climate terms from the per-row temperature.
-
-    ``regen_cap_kw`` (per row, before the cold factor and the SoC derating),
-    ``capped_s`` (time spent at the regen limit) and ``capped_fs`` (that time
-    weighted by the derating factor, default ``capped_s``) give ``regen_capped_kwh``.
-    ``climate_kw`` (mean steady climate power, e.g. from per-step logged
-    temperatures) and ``start_temperature_c`` (warm-up) default to the values
-    at ``temperature_c``; ``parked_s`` (per row, NaN: soaked) scales the warm-up.
-    ``heating_grid_kw`` (n, n_grid): mean heating power at each onset offset
-    (rows of NaN, or None: from ``temperature_c``); ``offset_grid=False`` skips
-    the offset grids (statistics only summed by the caller).
-    """
-    n = len(duration_s)
-    mult, eta_r, mode_kw = _profile_consts(profile, n)
-    t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
-    hvac = np.broadcast_to(hvac_power_kw(t, veh) if climate_kw is None else climate_kw, (n,))
-    duration_s = np.asarray(duration_s, float)
-    warm = np.zeros(n)
-    cool = np.zeros(n)
-    d_heat = d_warm = None
-    capped = np.zeros(n)
-    if capped_s is not None and regen_cap_kw is not None:
-        cs = np.broadcast_to(np.asarray(capped_s, dtype=float), (n,))
-        on = cs > 0  # inf * 0 would be NaN: only capped rows have a finite limit
-        fs = cs if capped_fs is None else np.broadcast_to(np.asarray(capped_fs, float), (n,))
-        capped[on] = np.broadcast_to(np.asarray(regen_cap_kw, float), (n,))[on] * fs[on] / 3600.0
-    if veh.climate_model == "continuous":
-        cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
-        trac, regen = cold_factors(t, veh)
-        mult, eta_r = mult * trac, eta_r * regen
-        capped = capped * regen
-        t0 = t if start_temperature_c is None else start_temperature_c
-        warm = np.broadcast_to(warmup_energy_kwh(t0, duration_s, veh, parked_s=parked_s),
-                               (n,)).copy()
-        if offset_grid:
-            vs = _offset_vehicles(veh)
-            hg = (np.full((n, len(vs)), np.nan) if heating_grid_kw is None
-                  else np.array(heating_grid_kw, dtype=float).reshape(n, len(vs)))
-            todo = np.isnan(hg).any(axis=1)
-            if todo.any():
-                hg[todo] = _heating_grid_kw(t[todo], vs)
-            i0 = int(np.flatnonzero(HEATING_OFFSET_GRID_K == 0.0)[0])
-            d_heat = (hg - hg[:, i0:i0 + 1]) * (duration_s / 3600.0)[:, None]
-            wg = np.stack([np.broadcast_to(warmup_energy_kwh(t0, duration_s, v,
-                                                             parked_s=parked_s), (n,))
-                           for v in vs], axis=-1)
-            d_warm = wg - wg[:, i0:i0 + 1]
-    kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
-    kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
-    return PhysicsStats(
-        **kw, duration_h=duration_s / 3600.0, hvac_kw=np.array(hvac, dtype=float),
-        mode_kw=mode_kw,
-        mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
-        log_weight=np.zeros(n) if log_weight is None else log_weight,
-        n_trips=n if n_trips is None else n_trips, vehicle=veh, max_speed_kmh=max_speed_kmh,
-        warmup_kwh=warm, cooling_kw=cool,
-        moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0,
-        heating_offset_dkwh=d_heat, warmup_offset_dkwh=d_warm, regen_capped_kwh=capped,
-        regen_capped_h=None if capped_s is None else np.asarray(capped_s, float) / 3600.0)
 
 
 def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
@@ -306,148 +180,6 @@ def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParam
     rest = rest_grade + s[:, -1] * c
     comps = (roll, aero, lin, rest)
     return [x[:, 0] for x in comps], [x[:, 1] for x in comps], n_capped, f_capped
-
-
-def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = None,
-                    profile="normal", temperature_c=None, parked_s=None,
-                    soc=None, _fs_out: list | None = None) -> PhysicsStats:
-    """Statistics of logged traces with a per-interval ``dt`` (no resampling).
-
-    Interval ``k`` of a trip uses the mean of its two speed samples, the
-    acceleration ``(v_{k+1} - v_k) / (t_{k+1} - t_k)`` and the mean of the two
-    sample grades, exactly as :mod:`hybridev.physics.forces` does for constant ``dt``.
-    A coarse log's hidden stop-and-go (``traces.hidden_pke_j_per_kg``, from
-    :mod:`hybridev.data.timeseries`) adds ``m x hidden`` to the inertial energy
-    of the driving intervals and, less the share of the trip's visible braking
-    energy beyond the regen limit (:func:`_capped_share`), to that of the
-    braking ones (``rest_pos``, ``rest_neg``): it costs
-    ``(mult / eta_d - eta_r (1 - share)) m x hidden``.
-
-    Parameters
-    ----------
-    traces : LoggedTraces
-    vehicle : VehicleParams, optional
-    profile : DrivingProfile, str, or sequence of them (n_trips,)
-    temperature_c : float or array_like (n_trips,), degC, optional
-        Sets the HVAC band (paper preset), the warm-up and the cold-weather
-        factors; default: the time mean of the logged temperature, else 20
-        degC. With the continuous climate model and a logged temperature, the
-        steady climate power is the time mean over the logged per-step
-        temperatures.
-    parked_s : float or array_like (n_trips,), s, optional
-        Time parked before each trip (NaN or None: soaked to ambient); scales
-        the warm-up (:func:`hybridev.physics.thermal.soak_fraction`).
-    soc : float or array_like (n_trips,), optional
-        State of charge at each trip's start (derates the regen limit along
-        the trip, :mod:`hybridev.physics.derate`); default: the first logged
-        ``soc`` sample, else unknown (no derating).
-
-    Returns
-    -------
-    PhysicsStats
-        One row per trace.
-    """
-    veh = vehicle or VehicleParams()
-    traces = traces.refined(_RAMP_STEP_S)  # a coarse log's straight ramps, every second
-    start, trip = traces.intervals()
-    nxt = start + 1
-    dt = traces.t_s[nxt] - traces.t_s[start]
-    v = traces.speed_mps
-    th = 0.5 * (traces.grade_rad[start] + traces.grade_rad[nxt])
-    comps, pw_kwh = _components(0.5 * (v[start] + v[nxt]), (v[nxt] - v[start]) / dt,
-                                np.cos(th), np.sin(th), dt, veh)
-    pos = pw_kwh > 0
-    n = len(traces)
-    prof = profile if isinstance(profile, DrivingProfile | str) else list(profile)
-    if soc is None and traces.soc is not None:
-        soc = traces.soc[traces.offsets[:-1]]
-    cap_kw, thr = _regen_threshold(veh, _profile_consts(prof, n)[1], n)
-    neg = ~pos
-    capped_s = capped_fs = np.zeros(n)
-    capped = np.zeros(len(dt), dtype=bool)
-    thr_i = thr[trip]
-    if np.isfinite(thr).any():  # braking energy beyond the limit over the interval
-        f = np.ones(len(dt))
-        if soc is not None:  # derated along the trip's SoC, by the interval's time fraction
-            dur = traces.duration_s()
-            a, b = _derate(veh, soc, thr, np.bincount(trip, 0.5 * (v[start] + v[nxt]) * dt,
-                                                      minlength=n), dur)
-            x = (0.5 * (traces.t_s[start] + traces.t_s[nxt]) - traces.t_s[traces.offsets[:-1]][trip])
-            f = np.clip(a[trip] + b[trip] * x / np.where(dur > 0, dur, 1.0)[trip], 0.0, 1.0)
-            thr_i = thr_i * f
-        capped = neg & (pw_kwh * _J_PER_KWH < -thr_i * dt)
-        neg &= ~capped
-        capped_s = np.bincount(trip, np.where(capped, dt, 0.0), minlength=n)
-        capped_fs = np.bincount(trip, np.where(capped, f * dt, 0.0), minlength=n)
-    if _fs_out is not None:  # trip_stats: the derated capped time, s (n,)
-        _fs_out.append(capped_fs)
-    sp = [np.bincount(trip, np.where(pos, c, 0.0), minlength=n) for c in comps]
-    sn = [np.bincount(trip, np.where(neg, c, 0.0), minlength=n) for c in comps]
-    if traces.hidden_pke_j_per_kg is not None:  # stop-and-go a coarse log hides: spent in
-        hid = veh.mass_kg * traces.hidden_pke_j_per_kg / _J_PER_KWH  # traction, regenerated
-        sp[3] = sp[3] + hid  # as the trip's visible braking is, up to the regen limit
-        sn[3] = sn[3] - hid * (1.0 - _capped_share(pw_kwh, capped, thr_i, trip, dt, n))
-    if temperature_c is None:
-        temperature_c = (traces.per_trip_mean(traces.temperature_c)
-                         if traces.temperature_c is not None else 20.0)
-    t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (n,))
-    vmax = np.zeros(n)
-    np.maximum.at(vmax, trip, np.maximum(v[start], v[nxt]))
-    heat, cool, grid = _logged_climate_kw(traces, veh, start, trip, dt)
-    vm = v[start] + v[nxt]
-    moving = np.bincount(trip, np.where(vm > 2.0 * MOVING_MPS, dt, 0.0), minlength=n)
-    return _assemble(sp, sn, traces.duration_s(), t, prof, veh, max_speed_kmh=vmax * 3.6,
-                     climate_kw=None if heat is None else heat + cool, cooling_kw=cool,
-                     moving_s=moving,
-                     parked_s=None if parked_s is None else np.broadcast_to(
-                         np.asarray(parked_s, float), (n,)), heating_grid_kw=grid,
-                     regen_cap_kw=cap_kw, capped_s=capped_s, capped_fs=capped_fs)
-
-
-def _capped_share(pw_kwh, capped, thr, trip, dt, n: int) -> np.ndarray:
-    """Share of each trip's braking wheel energy beyond the regen limit, shape (n,).
-
-    ``sum over capped intervals of (-P_w dt - thr dt)`` over ``sum over braking
-    intervals of -P_w dt`` (all at the reference vehicle, like the interval
-    split). The hidden braking of a coarse log is taken to be capped in the
-    same proportion as the trip's visible braking: at a derated limit (a full
-    pack, SoC near 1) the friction brakes take it, as they take the visible one.
-    """
-    if not capped.any():
-        return np.zeros(n)
-    brake = np.bincount(trip, np.where(pw_kwh < 0, -pw_kwh, 0.0), minlength=n)
-    beyond = np.bincount(trip, np.where(capped, -pw_kwh - np.where(capped, thr, 0.0)
-                                        * dt / _J_PER_KWH, 0.0), minlength=n)
-    return np.clip(np.divide(beyond, brake, out=np.zeros(n), where=brake > 0), 0.0, 1.0)
-
-
-def _logged_climate_kw(traces: LoggedTraces, veh: VehicleParams, start, trip, dt):
-    """Time-mean steady (heating, cooling) power of each trip from its per-step temperature, kW.
-
-    Only for the continuous climate model and traces with a temperature
-    column; ``(None, None, None)`` otherwise (the trip temperature is then
-    used). The third value is the heating power at each heating-onset offset
-    of :data:`~hybridev.physics.stats.HEATING_OFFSET_GRID_K`, shape (n, n_grid).
-    """
-    if veh.climate_model != "continuous" or traces.temperature_c is None:
-        return None, None, None
-    tt = traces.temperature_c
-    n = len(traces)
-    tot = np.bincount(trip, dt, minlength=n)
-    mean_t = traces.per_trip_mean(tt)
-    mid = 0.5 * (tt[start] + tt[start + 1])
-
-    def mean_of(p, fb):
-        m = np.bincount(trip, p * dt, minlength=n) / np.where(tot > 0, tot, 1.0)
-        return np.where(tot > 0, m, fb)
-
-    out = [mean_of(p, fb) for p, fb in zip(climate_split_kw(mid, veh),
-                                           climate_split_kw(mean_t, veh), strict=True)]
-    vs = _offset_vehicles(veh)
-    fallback = _heating_grid_kw(mean_t, vs)
-    grid = np.stack([mean_of(climate_split_kw(mid, v)[0], fallback[:, j])
-                     for j, v in enumerate(vs)], axis=-1)
-    return out[0], out[1], grid
 
 
 def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
