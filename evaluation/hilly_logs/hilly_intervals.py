@@ -199,4 +199,7 @@ def markdown_lines(res: dict) -> list[str]:
         lines += ["", f"Narrowest baseline with coverage >= {CALIBRATED}: {s['best_baseline']}; "
                   f"hybrid width over it: {s['width_over_best_baseline']:.2f} (issue 32's "
                   "target: <= 0.8)."]
+    lines += ["", "Whether a per-trip difficulty scale in the conformal score narrows these "
+              "intervals, and the narrowest width the logs' measurement noise allows any "
+              "predictor: [score_scale.md](score_scale.md) (`score_scale.py`)."]
     return [*lines, ""]

@@ -18,7 +18,8 @@ coarse log hides (``LoggedTraces.hidden_pke_j_per_kg``). The 90 % intervals of
 conformal intervals, come from ``hilly_intervals.py`` (its docstring); why the CV+
 fold physics behind those intervals scored worse than the deployed physics (a term
 discrepancy fitted by least squares, not the warm-started chains) is
-``fold_physics.py``'s study. Writes ``hilly_logs.md`` and
+``fold_physics.py``'s study; whether a per-trip scale in the conformal score can
+narrow them, and what the measurement noise allows, is ``score_scale.py``'s. Writes ``hilly_logs.md`` and
 ``.json`` to ``--out`` (default: this folder).
 """
 
