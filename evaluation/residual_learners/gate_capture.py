@@ -11,10 +11,12 @@ arrays its gate was fitted on (the CV+ step's out-of-fold measured energy, physi
 network residual, standardised inputs, distances and days) and the held-out trips'
 physics part, network residual and standardised inputs are saved as ``.npz`` (one
 file per data set and fold), with the in-sample relative residuals of the training trips
-(the networks' target), each scored trip's CV+ fold, the trip table and the physics terms
+(the networks' target), each scored trip's CV+ fold, each CV+ fold physics' relative
+residuals and standardised inputs of every trip (the fold networks' targets), the trip
+table and the physics terms
 of the NNLS baseline, for ``gate_replay.py``. Nothing here is committed output: the cache
 is a working folder (default ``/tmp/hybridev_gate_cache``). The script patches the gate's
-``fit`` and ``apply`` and ``fitting.fit_cv_plus`` only to record their arguments (restored
+``fit`` and ``apply``, ``fitting.fit_cv_plus`` and ``cvplus._training_arrays`` only to record their arguments (restored
 on exit); the fitted models are the library's defaults.
 """
 
@@ -34,7 +36,7 @@ sys.path.insert(0, str(HERE))
 import residual_learners as rl  # noqa: E402
 
 from hybridev import HybridModel, VehicleParams  # noqa: E402
-from hybridev.learning import fitting  # noqa: E402
+from hybridev.learning import cvplus, fitting  # noqa: E402
 from hybridev.learning.cvplus import cv_fold_assignment  # noqa: E402
 from hybridev.learning.gate import ResidualGate  # noqa: E402
 from hybridev.physics.stats_build import trip_stats  # noqa: E402
@@ -65,6 +67,14 @@ def capture(vehicle, m, out_prefix: Path) -> None:
     trips = m.trips
     rec: dict = {}
     orig_fit, orig_apply, orig_cv = ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus
+    orig_arrays = cvplus._training_arrays
+
+    def training_arrays(learner, table, e_meas):  # one call per CV+ fold, in fold order
+        xs_f, ys_f = orig_arrays(learner, table, e_meas)
+        rec.setdefault("fold_x", []).append(np.array(xs_f))
+        rec.setdefault("fold_r", []).append(
+            np.asarray(ys_f, float) * learner.target_std_ + learner.target_mean_)
+        return xs_f, ys_f
 
     def fit(self, e, p, r, d, groups=None, *, source="cv+"):
         if source == "cv+":
@@ -82,11 +92,13 @@ def capture(vehicle, m, out_prefix: Path) -> None:
         n_fit = kw.get("n_fitted") or int(fold.max()) + 1
         rec["labels"] = good.index.to_numpy()[fold < n_fit]
         rec["cv_fold"] = fold[fold < n_fit]
+        rec["cv_fold_all"] = fold
         rec["all"] = (good.index.to_numpy(), np.array(xs),  # in-sample relative residual
                       np.asarray(ys, float) * learner.target_std_ + learner.target_mean_)
         return orig_cv(physics, learner, raw, good, traces, codes, xs, ys, e_meas, seed, ss, **kw)
 
     ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus = fit, apply, fit_cv_plus
+    cvplus._training_arrays = training_arrays
     try:
         for k, (tr, te) in enumerate(GroupKFold(n_splits=rl.N_FOLDS).split(
                 trips, groups=trips["date"].to_numpy())):
@@ -108,10 +120,13 @@ def capture(vehicle, m, out_prefix: Path) -> None:
                      p_te=out["energy_kwh_physics"].to_numpy(float), r_te=r_te, x_te=x_te,
                      s_te=s_te, pred_te=out["energy_kwh_pred"].to_numpy(float),
                      date_te=test["date"].astype(str).to_numpy(), labels_all=rec["all"][0],
-                     x_all=rec["all"][1], r_in_all=rec["all"][2], cv_fold=rec["cv_fold"])
+                     x_all=rec["all"][1], r_in_all=rec["all"][2], cv_fold=rec["cv_fold"],
+                     cv_fold_all=rec["cv_fold_all"], fold_x=np.stack(rec["fold_x"]),
+                     fold_r=np.stack(rec["fold_r"]))
             print(f"  fold {k}: {time.perf_counter() - t0:.0f} s", flush=True)
     finally:
         ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus = orig_fit, orig_apply, orig_cv
+        cvplus._training_arrays = orig_arrays
 
 
 def main(argv=None) -> int:
