@@ -37,7 +37,9 @@ the gate was fitted on. Replayed on them (every learner predicts the relative re
 
 Also reported, per outer fold: the out-of-fold MAPE on the training days of the physics,
 of the physics plus the fold networks' correction, and of the physics plus the lead
-line (penalty 1, ``+park+elev``) mismatched and cross-fitted; and, pooled over the outer
+line (penalty 1, ``+park+elev``) mismatched and cross-fitted, also with each CV+ fold's
+level error removed (residual and correction less their fold means: the correction's
+value within a fold, free of the fold physics' level); and, pooled over the outer
 folds, the held-out gain of the ungated networks and of the lead line split into its
 *level* (the correction's mean over each fold's held-out trips) and *shape* (the rest),
 with its standard error over held-out days.
@@ -178,22 +180,6 @@ def _inner_oof(z, x, alpha):
     return oof
 
 
-def ridge_gated(names):
-    def f(z, trips, terms):
-        xtr, xte = _design(z, trips, terms, names)
-        best = None
-        for a in ALPHAS:
-            oof = _inner_oof(z, xtr, a)
-            w, ev = ResidualGate._choose(z["e"], z["p"], oof * z["p"], _scale(z), z["g"])
-            if best is None or ev["mape_gated"] < best[2]["mape_gated"]:
-                best = (a, w, ev)
-        a, w, ev = best
-        c, b = _ridge(xtr, z["r_in_all"], a)
-        return z["p_te"] * (1 + w * (xte @ c + b)), {"alpha": a, "w": round(w, 2),
-                                                     "t": round(ev["gain_t"], 2)}
-    return f
-
-
 def _fold_oof(z, extras, alpha):
     """Cross-fitted on the CV+ fold physics: for each CV+ fold, the line fitted on that
     fold physics' in-sample relative residuals of the other folds' trips (the fold
@@ -217,18 +203,34 @@ def _extras_all(z, trips, terms, names):
     return a
 
 
+def _level_free(z, corr_kwh):
+    """OOF MAPE (%) of the physics and of the physics plus ``corr_kwh`` with each CV+
+    fold's level removed: the relative residual ``(E* - E_p) / E_p`` and the relative
+    correction less their fold means."""
+    p = _target_scale(z)
+    res, corr = (z["e"] - z["p"]) / p, np.asarray(corr_kwh, float) / p
+    for f in np.unique(z["cv_fold"]):
+        m = z["cv_fold"] == f
+        res[m] -= res[m].mean()
+        corr[m] -= corr[m].mean()
+    s = _scale(z) / p
+    return float(np.mean(np.abs(res) / s) * 100), float(np.mean(np.abs(res - corr) / s) * 100)
+
+
 def _target_scale(z):
     """The learner's target scale of the gate's trips: ``max(|E_p|, 0.05 kWh/km d)``."""
     return np.maximum(np.abs(z["p"]), 0.05 * z["d"])
 
 
-def ridge_crossfit(names):
-    """Gated on the cross-fitted evidence (:func:`_fold_oof`): penalty and weight."""
+def ridge_gated(names, cross: bool):
+    """Penalty and weight chosen on the evidence: mismatched (:func:`_inner_oof`) or
+    cross-fitted (:func:`_fold_oof`); the deployed line is the final physics'."""
     def f(z, trips, terms):
         xtr, xte = _design(z, trips, terms, names)
         extras, best = _extras_all(z, trips, terms, names), None
         for a in ALPHAS:
-            q = _fold_oof(z, extras, a) * _target_scale(z)
+            q = (_fold_oof(z, extras, a) * _target_scale(z) if cross
+                 else _inner_oof(z, xtr, a) * z["p"])
             w, ev = ResidualGate._choose(z["e"], z["p"], q, _scale(z), z["g"])
             if best is None or ev["mape_gated"] < best[2]["mape_gated"]:
                 best = (a, w, ev)
@@ -248,10 +250,10 @@ METHODS = {
     "ridge1 x+terms+park": ridge(1.0, ("terms", "park")),
     "ridge100 x+terms+park": ridge(100.0, ("terms", "park")),
     "hgb x": hgb,
-    "ridge x+park+elev gated": ridge_gated(("park", "elev")),
-    "ridge x+terms+park gated": ridge_gated(("terms", "park")),
-    "ridge x crossfit-gated": ridge_crossfit(()),
-    "ridge x+park+elev crossfit-gated": ridge_crossfit(("park", "elev")),
+    "ridge x+park+elev gated": ridge_gated(("park", "elev"), False),
+    "ridge x+terms+park gated": ridge_gated(("terms", "park"), False),
+    "ridge x crossfit-gated": ridge_gated((), True),
+    "ridge x+park+elev crossfit-gated": ridge_gated(("park", "elev"), True),
 }
 HELD_OUT = ("networks_ungated", "ridge1 x+park+elev")
 """Ungated corrections whose held-out gain is split into level and shape."""
@@ -307,6 +309,8 @@ def run(cache: Path, key: str) -> dict:
             "mape_line_crossfit": float(np.mean(np.abs(
                 res_oof - cross * _target_scale(z)) / s) * 100),
             "mape_networks": float(np.mean(np.abs(res_oof - z["r"]) / s) * 100),
+            "level_free": [*_level_free(z, z["r"]),
+                           _level_free(z, cross * _target_scale(z))[1]],
             "mape_physics": float(np.mean(np.abs(res_oof) / s) * 100),
             "mape_line": float(np.mean(np.abs(z["e"] - z["p"] * (1 + oof)) / s) * 100),
             "mape_physics_in_sample": float(np.mean(np.abs(r_in / (1 + r_in))) * 100),
@@ -346,12 +350,17 @@ def _markdown(res: dict) -> str:
                   "`ridge1 x+park+elev` fitted two ways: *mismatched* (the last session's: "
                   f"{INNER_FOLDS} inner folds, the line fitted on the *final* physics' "
                   "residuals) and *cross-fitted* (the line of each CV+ fold fitted on that fold "
-                  "physics' own residuals, as the fold networks are):", "",
+                  "physics' own residuals, as the fold networks are); then the same three "
+                  "(physics, + fold networks, + line cross-fitted) with each CV+ fold's level "
+                  "removed (residual and correction less their fold means):", "",
                   "| fold | groups | physics | + fold networks | + line, mismatched | "
-                  "+ line, cross-fitted |", "|---|---|---|---|---|---|"]
+                  "+ line, cross-fitted | level-free: physics | + networks | + line |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         lines += [f"| {k} | {i['n_groups']} | {i['mape_physics']:.2f} | "
                   f"{i['mape_networks']:.2f} | {i['mape_line']:.2f} | "
-                  f"{i['mape_line_crossfit']:.2f} |" for k, i in enumerate(r["inner"])]
+                  f"{i['mape_line_crossfit']:.2f} | "
+                  + " | ".join(f"{x:.2f}" for x in i["level_free"]) + " |"
+                  for k, i in enumerate(r["inner"])]
         h = r["held_out_gain"]
         lines += ["", "Held-out gain of the ungated corrections, pooled over the outer folds: "
                   "MAPE (%) of the physics and of the physics corrected by the whole "
