@@ -3,6 +3,7 @@
 Run from the repository root (a few CPU-minutes per data set; use ``nice``)::
 
     nice -n 10 python evaluation/residual_learners/gate_capture.py [--only NAME] [--cache DIR]
+        [--split-seed N]
 
 Per data set (M1 when present, the synthetic ``hatch_ptc`` set of ``residual_learners.py``
 and a synthetic hilly 5 s log set, :func:`hybridev.physics.hilly.make_hilly_logs`) and
@@ -61,8 +62,25 @@ def hilly_dataset():
     return f"hilly 5 s ({HILLY_DAYS} days)", vehicle, m, extra
 
 
-def capture(vehicle, m, out_prefix: Path) -> None:
+def outer_folds(dates, split_seed=None):
+    """``(train, test)`` index pairs of the 3 outer folds grouped by date: scikit-learn's
+    ``GroupKFold`` (as ``residual_learners.py``), or with ``split_seed`` the days dealt to
+    the folds in a seeded random order (another partition, to check that a held-out
+    difference is not one partition's)."""
     from sklearn.model_selection import GroupKFold
+
+    if split_seed is None:
+        return list(GroupKFold(n_splits=rl.N_FOLDS).split(dates, groups=dates))
+    dates = np.asarray(dates).astype(str)
+    days = np.unique(dates)
+    fold_of = dict(zip(np.random.default_rng(split_seed).permutation(days),
+                       np.arange(len(days)) % rl.N_FOLDS, strict=True))
+    fold = np.array([fold_of[d] for d in dates])
+    idx = np.arange(len(dates))
+    return [(idx[fold != k], idx[fold == k]) for k in range(rl.N_FOLDS)]
+
+
+def capture(vehicle, m, out_prefix: Path, split_seed=None) -> None:
 
     trips = m.trips
     rec: dict = {}
@@ -100,8 +118,7 @@ def capture(vehicle, m, out_prefix: Path) -> None:
     ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus = fit, apply, fit_cv_plus
     cvplus._training_arrays = training_arrays
     try:
-        for k, (tr, te) in enumerate(GroupKFold(n_splits=rl.N_FOLDS).split(
-                trips, groups=trips["date"].to_numpy())):
+        for k, (tr, te) in enumerate(outer_folds(trips["date"].to_numpy(), split_seed)):
             t0 = time.perf_counter()
             rec.clear()
             train, test = m.select(np.isin(np.arange(len(trips)), tr)), trips.iloc[te]
@@ -134,6 +151,9 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=rl.rw.DEFAULT_DATA)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridev_gate_cache"))
     ap.add_argument("--only", default=None)
+    ap.add_argument("--split-seed", type=int, default=None,
+                    help="deal the days to the outer folds in this seeded random order "
+                         "(default: GroupKFold, as residual_learners.py)")
     args = ap.parse_args(argv)
     args.cache.mkdir(parents=True, exist_ok=True)
     sets = [*rl.datasets(args.data), hilly_dataset()]
@@ -150,7 +170,7 @@ def main(argv=None) -> int:
             f = trip_stats(m.trips, dataclasses.replace(vehicle, heater_kind=kind),
                            traces=m.traces).features()
         np.savez(args.cache / f"{key}_terms.npz", f=f, labels=m.trips.index.to_numpy())
-        capture(vehicle, m, args.cache / key)
+        capture(vehicle, m, args.cache / key, args.split_seed)
     return 0
 
 

@@ -3,6 +3,11 @@
 Run from the repository root, after ``gate_capture.py`` filled the cache (seconds)::
 
     python evaluation/residual_learners/gate_replay.py [--cache DIR] [--out DIR]
+        [--also DIR=LABEL ...]
+
+The committed ``GATE_STUDY.md`` also replays M1 on two other partitions of its days
+(``gate_capture.py --only M1 --split-seed 1`` and ``2``, each in its own cache, passed
+as ``--also DIR="days dealt by seed N"``).
 
 For each captured data set (M1, the synthetic ``hatch_ptc`` set, the synthetic hilly 5 s
 logs) and each of its 3 date-grouped outer folds, the captured ``HybridModel`` default
@@ -399,8 +404,14 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridev_gate_cache"),
                     help="the folder gate_capture.py wrote")
     ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--also", action="append", default=[], metavar="DIR=LABEL",
+                    help="another cache (e.g. gate_capture.py --split-seed N), its data "
+                         "sets reported as 'NAME, LABEL'")
     args = ap.parse_args(argv)
-    res = {k: run(args.cache, k) for k in KEYS if (args.cache / f"{k}_fold0.npz").is_file()}
+    caches = [(args.cache, "")] + [(Path(a.split("=", 1)[0]), f", {a.split('=', 1)[1]}")
+                                   for a in args.also]
+    res = {k + label: run(c, k) for c, label in caches for k in KEYS
+           if (c / f"{k}_fold0.npz").is_file()}
     with atomic_path(args.out / "gate_study.json") as tmp:
         Path(tmp).write_text(json.dumps(res, indent=1, default=float))
     with atomic_path(args.out / "GATE_STUDY.md") as tmp:
