@@ -3,6 +3,7 @@
 Run from the repository root (a few CPU-minutes per data set; use ``nice``)::
 
     nice -n 10 python evaluation/residual_learners/gate_capture.py [--only NAME] [--cache DIR]
+        [--split-seed N]
 
 Per data set (M1 when present, the synthetic ``hatch_ptc`` set of ``residual_learners.py``
 and a synthetic hilly 5 s log set, :func:`hybridev.physics.hilly.make_hilly_logs`) and
@@ -11,10 +12,12 @@ arrays its gate was fitted on (the CV+ step's out-of-fold measured energy, physi
 network residual, standardised inputs, distances and days) and the held-out trips'
 physics part, network residual and standardised inputs are saved as ``.npz`` (one
 file per data set and fold), with the in-sample relative residuals of the training trips
-(the networks' target), each scored trip's CV+ fold, the trip table and the physics terms
+(the networks' target), each scored trip's CV+ fold, each CV+ fold physics' relative
+residuals and standardised inputs of every trip (the fold networks' targets), the trip
+table and the physics terms
 of the NNLS baseline, for ``gate_replay.py``. Nothing here is committed output: the cache
 is a working folder (default ``/tmp/hybridev_gate_cache``). The script patches the gate's
-``fit`` and ``apply`` and ``fitting.fit_cv_plus`` only to record their arguments (restored
+``fit`` and ``apply``, ``fitting.fit_cv_plus`` and ``cvplus._training_arrays`` only to record their arguments (restored
 on exit); the fitted models are the library's defaults.
 """
 
@@ -34,7 +37,7 @@ sys.path.insert(0, str(HERE))
 import residual_learners as rl  # noqa: E402
 
 from hybridev import HybridModel, VehicleParams  # noqa: E402
-from hybridev.learning import fitting  # noqa: E402
+from hybridev.learning import cvplus, fitting  # noqa: E402
 from hybridev.learning.cvplus import cv_fold_assignment  # noqa: E402
 from hybridev.learning.gate import ResidualGate  # noqa: E402
 from hybridev.physics.stats_build import trip_stats  # noqa: E402
@@ -59,12 +62,37 @@ def hilly_dataset():
     return f"hilly 5 s ({HILLY_DAYS} days)", vehicle, m, extra
 
 
-def capture(vehicle, m, out_prefix: Path) -> None:
+def outer_folds(dates, split_seed=None):
+    """``(train, test)`` index pairs of the 3 outer folds grouped by date: scikit-learn's
+    ``GroupKFold`` (as ``residual_learners.py``), or with ``split_seed`` the days dealt to
+    the folds in a seeded random order (another partition, to check that a held-out
+    difference is not one partition's)."""
     from sklearn.model_selection import GroupKFold
+
+    if split_seed is None:
+        return list(GroupKFold(n_splits=rl.N_FOLDS).split(dates, groups=dates))
+    dates = np.asarray(dates).astype(str)
+    days = np.unique(dates)
+    fold_of = dict(zip(np.random.default_rng(split_seed).permutation(days),
+                       np.arange(len(days)) % rl.N_FOLDS, strict=True))
+    fold = np.array([fold_of[d] for d in dates])
+    idx = np.arange(len(dates))
+    return [(idx[fold != k], idx[fold == k]) for k in range(rl.N_FOLDS)]
+
+
+def capture(vehicle, m, out_prefix: Path, split_seed=None) -> None:
 
     trips = m.trips
     rec: dict = {}
     orig_fit, orig_apply, orig_cv = ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus
+    orig_arrays = cvplus._training_arrays
+
+    def training_arrays(learner, table, e_meas):  # one call per CV+ fold, in fold order
+        xs_f, ys_f = orig_arrays(learner, table, e_meas)
+        rec.setdefault("fold_x", []).append(np.array(xs_f))
+        rec.setdefault("fold_r", []).append(
+            np.asarray(ys_f, float) * learner.target_std_ + learner.target_mean_)
+        return xs_f, ys_f
 
     def fit(self, e, p, r, d, groups=None, *, source="cv+"):
         if source == "cv+":
@@ -82,14 +110,15 @@ def capture(vehicle, m, out_prefix: Path) -> None:
         n_fit = kw.get("n_fitted") or int(fold.max()) + 1
         rec["labels"] = good.index.to_numpy()[fold < n_fit]
         rec["cv_fold"] = fold[fold < n_fit]
+        rec["cv_fold_all"] = fold
         rec["all"] = (good.index.to_numpy(), np.array(xs),  # in-sample relative residual
                       np.asarray(ys, float) * learner.target_std_ + learner.target_mean_)
         return orig_cv(physics, learner, raw, good, traces, codes, xs, ys, e_meas, seed, ss, **kw)
 
     ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus = fit, apply, fit_cv_plus
+    cvplus._training_arrays = training_arrays
     try:
-        for k, (tr, te) in enumerate(GroupKFold(n_splits=rl.N_FOLDS).split(
-                trips, groups=trips["date"].to_numpy())):
+        for k, (tr, te) in enumerate(outer_folds(trips["date"].to_numpy(), split_seed)):
             t0 = time.perf_counter()
             rec.clear()
             train, test = m.select(np.isin(np.arange(len(trips)), tr)), trips.iloc[te]
@@ -108,10 +137,13 @@ def capture(vehicle, m, out_prefix: Path) -> None:
                      p_te=out["energy_kwh_physics"].to_numpy(float), r_te=r_te, x_te=x_te,
                      s_te=s_te, pred_te=out["energy_kwh_pred"].to_numpy(float),
                      date_te=test["date"].astype(str).to_numpy(), labels_all=rec["all"][0],
-                     x_all=rec["all"][1], r_in_all=rec["all"][2], cv_fold=rec["cv_fold"])
+                     x_all=rec["all"][1], r_in_all=rec["all"][2], cv_fold=rec["cv_fold"],
+                     cv_fold_all=rec["cv_fold_all"], fold_x=np.stack(rec["fold_x"]),
+                     fold_r=np.stack(rec["fold_r"]))
             print(f"  fold {k}: {time.perf_counter() - t0:.0f} s", flush=True)
     finally:
         ResidualGate.fit, ResidualGate.apply, fitting.fit_cv_plus = orig_fit, orig_apply, orig_cv
+        cvplus._training_arrays = orig_arrays
 
 
 def main(argv=None) -> int:
@@ -119,6 +151,9 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=rl.rw.DEFAULT_DATA)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridev_gate_cache"))
     ap.add_argument("--only", default=None)
+    ap.add_argument("--split-seed", type=int, default=None,
+                    help="deal the days to the outer folds in this seeded random order "
+                         "(default: GroupKFold, as residual_learners.py)")
     args = ap.parse_args(argv)
     args.cache.mkdir(parents=True, exist_ok=True)
     sets = [*rl.datasets(args.data), hilly_dataset()]
@@ -135,7 +170,7 @@ def main(argv=None) -> int:
             f = trip_stats(m.trips, dataclasses.replace(vehicle, heater_kind=kind),
                            traces=m.traces).features()
         np.savez(args.cache / f"{key}_terms.npz", f=f, labels=m.trips.index.to_numpy())
-        capture(vehicle, m, args.cache / key)
+        capture(vehicle, m, args.cache / key, args.split_seed)
     return 0
 
 
