@@ -30,7 +30,7 @@ import torch
 
 from hybridev.learning.features import _feature_matrix, fit_standardizer, trip_features
 from hybridev.learning.nn import EnsembleMLP, n_parameters, train_ensemble
-from hybridev.learning.support import interpolation_support
+from hybridev.learning.support import gap_rows, interpolation_support
 
 __all__ = ["MIN_BLOCK_ROWS", "PREDICT_BLOCK_ROWS", "ResidualLearner", "hold_distances",
            "hold_inputs", "residual_scale"]
@@ -250,7 +250,8 @@ class ResidualLearner:
         ``nets[i]`` (``None``: ``net_``). Inputs are held inside ``distance_range``
         (km, :func:`hold_inputs`) and ``domain``'s feature range, and the correction
         is weighted by its support (:func:`~hybridev.learning.support.interpolation_support`);
-        each table's inputs are built once.
+        each table's inputs are built once. The noise of a trip in a gap between training
+        values is drawn toward the noise at the bracketing values (:meth:`_gap_noise`).
         """
         inputs, out = {}, []
         for net, e in zip(nets, index, strict=True):
@@ -260,10 +261,39 @@ class ResidualLearner:
                 scale = self.target_scale(_column(table, "energy_kwh_physics"),
                                           _column(table, "distance_km")) * factor
                 inputs[e] = (self.features(held, domain), scale,
-                             interpolation_support(table, domain))
-            x, scale, support = inputs[e]
-            out.append(self.moments(x, scale, net=net, support=support))
+                             interpolation_support(table, domain), held)
+            x, scale, support, held = inputs[e]
+            mean, var = self.moments(x, scale, net=net, support=support)
+            out.append((mean, self._gap_noise(held, scale, var, net, domain)))
         return out
+
+    def _gap_noise(self, table, scale, var, net, domain):
+        """Member noise variances (n_members, n_trips) with each trip in a gap between
+        training values drawn toward the noise at the bracketing values: ``w var(x) +
+        (1 - w) var_ab`` per gap quantity, ``var_ab`` the log-linear interpolation between
+        the noise of the same trip with that quantity set to the lower and to the upper
+        training value, ``w`` the support (:mod:`hybridev.learning.support`)."""
+        if var is None:
+            return var
+        gaps = gap_rows(table, domain)
+        if not gaps:
+            return var
+        var = var.copy()
+        scale = np.broadcast_to(np.asarray(scale, float), (var.shape[1],))
+        for g in gaps:
+            ends = []
+            for value in (g.lo, g.hi):
+                if isinstance(table, dict):
+                    sub = {k: (np.asarray(v)[g.rows] if np.ndim(v) else v)
+                           for k, v in table.items()}
+                    sub[g.name] = value
+                else:
+                    sub = table.iloc[g.rows].assign(**{g.name: value})
+                ends.append(self.moments(self.features(sub, domain), scale[g.rows],
+                                         net=net)[1])
+            log_ab = (1.0 - g.t) * np.log(ends[0]) + g.t * np.log(ends[1])
+            var[:, g.rows] = g.support * var[:, g.rows] + (1.0 - g.support) * np.exp(log_ab)
+        return var
 
     def point(self, table, domain=None) -> np.ndarray:
         """Point energy (kWh) of a physics table (or its columns as arrays by name),

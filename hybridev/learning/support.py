@@ -33,11 +33,13 @@ everywhere and only real gaps in its data revert to the physics.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from hybridev.learning.domain import DOMAIN_QUANTITIES, DOMAIN_TOLERANCES, INTENSIVE
 
-__all__ = ["SUPPORT_LENGTH_TOLERANCES", "interpolation_support"]
+__all__ = ["SUPPORT_LENGTH_TOLERANCES", "GapRows", "gap_rows", "interpolation_support"]
 
 SUPPORT_LENGTH_TOLERANCES = 2.0
 """Length scale of the support kernel, in domain tolerances (6 degC, 16 km/h, 2 %)."""
@@ -51,11 +53,12 @@ def _column(table, name: str) -> np.ndarray | None:
     return None if v is None else np.asarray(v, dtype=float)
 
 
-def _bracket_support(x: np.ndarray, values: np.ndarray, ell: float) -> np.ndarray:
-    """Support (n,) of ``x`` between the sorted unique training ``values``; 1 outside."""
+def _brackets(x: np.ndarray, values: np.ndarray, ell: float):
+    """``(w, a, b)``: support (n,) of ``x`` between the sorted unique training ``values``
+    (1 outside them) and the bracketing training values ``a <= x <= b``."""
     n_val = len(values)
     if n_val < 2:
-        return np.ones_like(x)
+        return np.ones_like(x), x, x
     i = np.searchsorted(values, x)
     inside = (i > 0) & (i < n_val)
     a = values[np.clip(i - 1, 0, n_val - 1)]
@@ -65,7 +68,60 @@ def _bracket_support(x: np.ndarray, values: np.ndarray, ell: float) -> np.ndarra
         return np.exp(-0.5 * (d / ell) ** 2)
 
     w = (k(x - a) + k(b - x)) / (1.0 + k(b - a))
-    return np.where(inside, np.clip(w, 0.0, 1.0), 1.0)
+    return np.where(inside, np.clip(w, 0.0, 1.0), 1.0), a, b
+
+
+def _bracket_support(x: np.ndarray, values: np.ndarray, ell: float) -> np.ndarray:
+    return _brackets(x, values, ell)[0]
+
+
+@dataclass(frozen=True)
+class GapRows:
+    """The trips inside a gap of one intensive quantity (support below 1).
+
+    Attributes
+    ----------
+    name : str
+        The quantity (a trip-table column).
+    rows : numpy.ndarray of int, (k,)
+        The trips in a gap.
+    support : numpy.ndarray, (k,)
+        Their support in this quantity, in [0, 1).
+    lo, hi : numpy.ndarray, (k,)
+        The bracketing training values, in the quantity's unit.
+    t : numpy.ndarray, (k,)
+        The trip's position between them, ``(x - lo) / (hi - lo)`` in (0, 1).
+    """
+
+    name: str
+    rows: np.ndarray
+    support: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    t: np.ndarray
+
+
+def gap_rows(table, domain) -> list[GapRows]:
+    """The trips in a gap between training values, per intensive quantity.
+
+    Used to set the noise of a trip in a gap from the noise at the bracketing training
+    values (:meth:`hybridev.learning.residual.ResidualLearner.predict_moments`): the
+    noise head interpolates as blindly as the mean. Empty without a domain.
+    """
+    out = []
+    if domain is None:
+        return out
+    for j, name in enumerate(DOMAIN_QUANTITIES):
+        x = _column(table, name) if INTENSIVE[j] else None
+        if x is None:
+            continue
+        ell = SUPPORT_LENGTH_TOLERANCES * DOMAIN_TOLERANCES[j]
+        w, a, b = _brackets(x, np.asarray(domain.values[j], float), ell)
+        rows = np.flatnonzero(w < 1.0)
+        if rows.size:
+            lo, hi = a[rows], b[rows]
+            out.append(GapRows(name, rows, w[rows], lo, hi, (x[rows] - lo) / (hi - lo)))
+    return out
 
 
 def interpolation_support(table, domain) -> np.ndarray | None:
