@@ -73,3 +73,47 @@ def test_prediction_in_a_wide_gap_reverts_to_the_physics(gap_model):
     dist = m.predict_distribution(trips, level=0.9, seed=0)
     assert dist.mean()[1] - dist.physics_draws_kwh.mean(0)[1] == pytest.approx(
         w[1] * full[1], rel=1e-4, abs=1e-6)
+
+
+def test_noise_in_a_gap_is_drawn_toward_the_noise_at_the_bracketing_values(gap_model):
+    m = gap_model
+    lrn, dom = m.learner_, m.domain_
+    pred = m.predict(_table([7.5], speed=60.0).assign(hour=8.0, soc_initial=0.8))
+    cols = {c: pred[c].to_numpy() for c in pred.columns}
+    scale = lrn.target_scale(cols["energy_kwh_physics"], cols["distance_km"])
+
+    def noise(temp):
+        table = {**cols, "temperature_c": np.array([temp])}
+        return lrn.moments(lrn.features(table, dom), scale)[1][:, 0]
+
+    var = lrn.predict_moments([cols], [0], [None], None, dom)[0][1][:, 0]
+    w = interpolation_support(cols, dom)[0]
+    assert 0.0 < w < 0.3
+    between = np.exp(0.5 * np.log(noise(-5.0)) + 0.5 * np.log(noise(20.0)))  # 7.5: midway
+    assert var == pytest.approx(w * noise(7.5) + (1.0 - w) * between, rel=1e-5)
+    # a trip at a training value keeps the network's own noise
+    at = {**cols, "temperature_c": np.array([20.0])}
+    assert lrn.predict_moments([at], [0], [None], None, dom)[0][1][:, 0] == pytest.approx(
+        noise(20.0), rel=1e-6)
+
+
+def test_raw_distributions_take_a_refit_domain_for_held_out_bands(gap_model):
+    """Held-out bands (learning.fitting.held_band_scores) score a band with the support of
+    the domain the refit was trained on: the band's own values are a gap there."""
+    from dataclasses import replace
+
+    from hybridev.learning.pipeline import raw_distributions
+
+    m = gap_model
+    trips = _table([20.0], speed=60.0).assign(hour=8.0, soc_initial=0.8)
+    vals = list(m.domain_.values)
+    vals[0] = vals[0][vals[0] != 20.0]  # the refit never saw 20 degC
+    band = replace(m.domain_, values=tuple(vals))
+    own = raw_distributions(m, trips)[0][0]
+    held = raw_distributions(m, trips, domain=band)[0][0]
+    w = interpolation_support(trips, band)[0]
+    assert w < 0.5
+    own_corr = own.residual_mean_kwh.mean(0)[0]
+    assert abs(own_corr) > 1e-6
+    assert held.residual_mean_kwh.mean(0)[0] == pytest.approx(w * own_corr, rel=1e-5,
+                                                              abs=1e-9)
