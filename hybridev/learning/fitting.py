@@ -307,8 +307,12 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
     xs, ys = learner.scaled(trip_features(table, learner.feature_names),
                             (e_meas - e_p) / scale if learner.residual else e_meas)
     seeds = np.random.SeedSequence([int(seed), 31]).generate_state(16)
+    q = domain_quantities(good, traces)[0]
+    held = {}  # the domain of the current refit: its support is the band's (learning.support)
 
     def refit(keep, k):
+        held["domain"] = dataclasses.replace(model.domain_, values=tuple(
+            np.unique(q[keep, c]) for c in range(q.shape[1])))
         return learner.train(xs, ys, np.intersect1d(split.train, keep),
                              np.intersect1d(split.val, keep), int(seeds[k % 16]))[0]
 
@@ -316,11 +320,10 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # out-of-domain warnings of the held-out band
             d = raw_distributions(model, good.iloc[rows], traces, seed=int(seed),
-                                  nets=[net])[0][0]
+                                  nets=[net], domain=held.get("domain"))[0][0]
         return (e_meas[rows] - d.mean()) / np.maximum(d.std(), 1e-12)
 
-    return band_scores(domain_quantities(good, traces)[0], split.rest, split.cal, refit,
-                       score)
+    return band_scores(q, split.rest, split.cal, refit, score)
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,

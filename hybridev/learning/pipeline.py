@@ -64,7 +64,7 @@ multiplies all trips alike, so it is not applied to them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -174,7 +174,8 @@ def _raw(parts: _Parts, trips: pd.DataFrame, traces=None, *, seed: int = 0, nets
 
 
 def raw_distributions(model, trips: pd.DataFrame, traces=None, *, seed: int = 0,
-                      nets=(None,), physics=None, modes: bool = False, warn: bool = False
+                      nets=(None,), physics=None, modes: bool = False, warn: bool = False,
+                      domain=None
                       ) -> tuple[list[EnergyDistribution], object, object, np.ndarray | None]:
     """Steps 1-4: one raw distribution per ensemble in ``nets``.
 
@@ -185,9 +186,13 @@ def raw_distributions(model, trips: pd.DataFrame, traces=None, *, seed: int = 0,
     :class:`~hybridev.learning.steps.DomainAssessment` (None without a domain) and, with
     ``modes``, the point energies of the trips lacking a trained-with mode under each
     of the three modes (3, n_no_mode; else None). ``warn``: warn when trips are out of
-    the domain.
+    the domain. ``domain``: a :class:`~hybridev.learning.domain.TrainingDomain` in place
+    of the model's (a refit on part of the trips: held-out bands).
     """
-    return _raw(_Parts.of(model), trips, traces, seed=seed, nets=nets, physics=physics,
+    parts = _Parts.of(model)
+    if domain is not None:
+        parts = replace(parts, domain=domain)
+    return _raw(parts, trips, traces, seed=seed, nets=nets, physics=physics,
                 modes=modes, warn=warn)
 
 

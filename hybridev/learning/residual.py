@@ -30,6 +30,7 @@ import torch
 
 from hybridev.learning.features import _feature_matrix, fit_standardizer, trip_features
 from hybridev.learning.nn import EnsembleMLP, n_parameters, train_ensemble
+from hybridev.learning.support import gap_rows, interpolation_support
 
 __all__ = ["MIN_BLOCK_ROWS", "PREDICT_BLOCK_ROWS", "ResidualLearner", "hold_distances",
            "hold_inputs", "residual_scale"]
@@ -204,15 +205,16 @@ class ResidualLearner:
         """:meth:`features` of a table given as arrays by column name."""
         return self.standardized(_feature_matrix(columns, n_trips, self.feature_names), domain)
 
-    def moments(self, x: np.ndarray, scale=1.0, net=None
+    def moments(self, x: np.ndarray, scale=1.0, net=None, support=None
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Per-member output in kWh: ``mean (n_members, n_trips)`` and ``var`` or None.
 
         ``x`` standardised inputs (:meth:`features`); ``scale`` (n_trips,) the target
         scale; ``net`` another ensemble with this standardisation (a CV+ fold model).
         The mean is each member's residual (``PureML``: energy), scaled by the gate's
-        weight when ``gate_`` is set; the variance its predicted noise (kWh^2; None
-        without variance heads).
+        weight when ``gate_`` is set, and by ``support`` (n_trips,), the correction's
+        support between training values (:mod:`hybridev.learning.support`; None: 1);
+        the variance its predicted noise (kWh^2; None without variance heads).
         """
         net = self.net_ if net is None else net
         x = np.ascontiguousarray(x, dtype=np.float32)
@@ -233,6 +235,8 @@ class ResidualLearner:
         gate = getattr(self, "gate_", None)  # the stacking gate (hybridev.learning.gate)
         if gate is not None and self.residual:
             mean = gate.apply(mean, x, np.broadcast_to(scale, (x.shape[0],)))
+        if support is not None and self.residual:  # revert to the physics in data gaps
+            mean = mean * np.asarray(support, float)[None, :]
         if variances[0] is None:
             return mean, None
         return mean, np.concatenate(variances, axis=1).astype(float) * (self.target_std_ * scale)**2
@@ -244,8 +248,10 @@ class ResidualLearner:
         ``tables``: physics tables (one per physics; or their columns as arrays by
         name, :meth:`PhysicsDraws.entry_columns`); ``index[i]``: the table of
         ``nets[i]`` (``None``: ``net_``). Inputs are held inside ``distance_range``
-        (km, :func:`hold_inputs`) and ``domain``'s feature range; each table's inputs
-        are built once.
+        (km, :func:`hold_inputs`) and ``domain``'s feature range, and the correction
+        is weighted by its support (:func:`~hybridev.learning.support.interpolation_support`);
+        each table's inputs are built once. The noise of a trip in a gap between training
+        values is drawn toward the noise at the bracketing values (:meth:`_gap_noise`).
         """
         inputs, out = {}, []
         for net, e in zip(nets, index, strict=True):
@@ -254,16 +260,49 @@ class ResidualLearner:
                 held, factor = hold_inputs(table, distance_range, self.relative)
                 scale = self.target_scale(_column(table, "energy_kwh_physics"),
                                           _column(table, "distance_km")) * factor
-                inputs[e] = (self.features(held, domain), scale)
-            out.append(self.moments(*inputs[e], net=net))
+                inputs[e] = (self.features(held, domain), scale,
+                             interpolation_support(table, domain), held)
+            x, scale, support, held = inputs[e]
+            mean, var = self.moments(x, scale, net=net, support=support)
+            out.append((mean, self._gap_noise(held, scale, var, net, domain)))
         return out
+
+    def _gap_noise(self, table, scale, var, net, domain):
+        """Member noise variances (n_members, n_trips) with each trip in a gap between
+        training values drawn toward the noise at the bracketing values: ``w var(x) +
+        (1 - w) var_ab`` per gap quantity, ``var_ab`` the log-linear interpolation between
+        the noise of the same trip with that quantity set to the lower and to the upper
+        training value, ``w`` the support (:mod:`hybridev.learning.support`)."""
+        if var is None:
+            return var
+        gaps = gap_rows(table, domain)
+        if not gaps:
+            return var
+        var = var.copy()
+        scale = np.broadcast_to(np.asarray(scale, float), (var.shape[1],))
+        for g in gaps:
+            ends = []
+            for value in (g.lo, g.hi):
+                if isinstance(table, dict):
+                    sub = {k: (np.asarray(v)[g.rows] if np.ndim(v) else v)
+                           for k, v in table.items()}
+                    sub[g.name] = value
+                else:
+                    sub = table.iloc[g.rows].assign(**{g.name: value})
+                ends.append(self.moments(self.features(sub, domain), scale[g.rows],
+                                         net=net)[1])
+            log_ab = (1.0 - g.t) * np.log(ends[0]) + g.t * np.log(ends[1])
+            var[:, g.rows] = g.support * var[:, g.rows] + (1.0 - g.support) * np.exp(log_ab)
+        return var
 
     def point(self, table, domain=None) -> np.ndarray:
         """Point energy (kWh) of a physics table (or its columns as arrays by name),
         without the distance hold (n_trips,)."""
         e = _column(table, "energy_kwh_physics")
         scale = self.target_scale(e, _column(table, "distance_km"))
-        return self.combine(e, self.moments(self.features(table, domain), scale)[0].mean(0))
+        support = interpolation_support(table, domain)
+        return self.combine(e, self.moments(self.features(table, domain), scale,
+                                            support=support)[0].mean(0))
 
     def point_of_columns(self, columns: dict, n_trips: int, distance_range, domain=None
                          ) -> np.ndarray:
@@ -272,7 +311,8 @@ class ResidualLearner:
         held, factor = hold_inputs(columns, distance_range, self.relative)
         scale = self.target_scale(e, columns["distance_km"]) * factor
         x = self.column_features(held, n_trips, domain)
-        return self.combine(e, self.moments(x, scale)[0].mean(0))
+        support = interpolation_support(columns, domain)
+        return self.combine(e, self.moments(x, scale, support=support)[0].mean(0))
 
     def combine(self, energy_physics: np.ndarray, network_mean: np.ndarray) -> np.ndarray:
         """Point energy (kWh) from the physics and the members' mean output.
