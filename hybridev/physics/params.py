@@ -200,6 +200,16 @@ class VehicleParams:
         form is an assumption the calibration's ``regen_scale`` absorbs.
     cold_ref_c : float
         Temperature below which the cold losses start, degC.
+    cold_soak_time_constant_s : float
+        Time constant with which the tyres, driveline oil and pack of a parked
+        car relax from driving temperature to ambient, s: a trip that starts
+        ``p`` seconds after the previous one ended pays the share
+        ``1 - exp(-p / tau)`` of the cold losses above
+        (:func:`hybridev.physics.thermal.cold_factors`); trips with no
+        ``parked_min`` pay all of them. 3600 s: tyre makers call tyres "cold"
+        after about 3 h parked (three time constants, 95 % relaxed), and
+        gearbox oil cools on the same scale; the pack alone is slower
+        (``battery_soak_time_constant_s``).
     regen_max_kw : float or None
         Largest power the battery accepts from regenerative braking, kW
         (recovered power, battery side). Braking power whose recovered share
@@ -273,6 +283,7 @@ class VehicleParams:
     cold_traction_loss_per_k: float = 0.004
     cold_regen_loss_per_k: float = 0.01
     cold_ref_c: float = 20.0
+    cold_soak_time_constant_s: float = 3600.0
     regen_max_kw: float | None = None
     regen_derate_soc: float = 0.9
     road_load_source: str = "datasheet"
@@ -311,6 +322,7 @@ class VehicleParams:
                              ("battery_heat_below_c", -40.0, 40.0),
                              ("cabin_soak_time_constant_s", 1.0, 1e6),
                              ("battery_soak_time_constant_s", 1.0, 1e6),
+                             ("cold_soak_time_constant_s", 1.0, 1e6),
                              ("cold_traction_loss_per_k", 0.0, 0.05),
                              ("cold_regen_loss_per_k", 0.0, 0.1),
                              ("cold_ref_c", -40.0, 40.0), ("heating_use", 0.0, 10.0),

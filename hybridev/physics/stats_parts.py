@@ -115,7 +115,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         capped[on] = np.broadcast_to(np.asarray(regen_cap_kw, float), (n,))[on] * fs[on] / 3600.0
     if veh.climate_model == "continuous":
         cool[:] = climate_split_kw(t, veh)[1] if cooling_kw is None else cooling_kw
-        trac, regen = cold_factors(t, veh)
+        trac, regen = cold_factors(t, veh, parked_s=parked_s)
         mult, eta_r = mult * trac, eta_r * regen
         capped = capped * regen
         t0 = t if start_temperature_c is None else start_temperature_c

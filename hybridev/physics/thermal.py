@@ -249,22 +249,35 @@ def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | 
     return warm + bat + cool
 
 
-def cold_factors(temperature_c, vehicle: VehicleParams | None = None
+def cold_factors(temperature_c, vehicle: VehicleParams | None = None, parked_s=None
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Multipliers of traction energy and of regenerated energy at ambient temperature.
 
     Both are 1 at or above ``cold_ref_c`` and for the paper's climate model.
+    With ``parked_s`` the excess below ``cold_ref_c`` is scaled by
+    :func:`soak_fraction` with ``cold_soak_time_constant_s``: a car driven
+    shortly before still has warm tyres, driveline and pack.
+
+    Parameters
+    ----------
+    temperature_c : float or array_like, degC
+    vehicle : VehicleParams, optional
+    parked_s : float or array_like, s, optional
+        Time parked since the previous trip (NaN or None: soaked to ambient).
 
     Returns
     -------
-    traction, regen : numpy.ndarray, same shape as ``temperature_c``
-        ``1 + k_t max(T_ref - T, 0)`` and ``1 - min(k_r max(T_ref - T, 0), 0.8)``.
+    traction, regen : numpy.ndarray, broadcast shape
+        ``1 + k_t f max(T_ref - T, 0)`` and ``1 - min(k_r f max(T_ref - T, 0), 0.8)``,
+        ``f`` the soak fraction (1 without ``parked_s``).
 
     Examples
     --------
     >>> v = VehicleParams(climate_model="continuous")
     >>> [x.round(3).tolist() for x in cold_factors([-7.0, 25.0], v)]
     [[1.108, 1.0], [0.73, 1.0]]
+    >>> [float(x.round(3)) for x in cold_factors(-7.0, v, parked_s=600.0)]
+    [1.017, 0.959]
     """
     v = vehicle or VehicleParams()
     t = _temps(temperature_c)
@@ -272,5 +285,7 @@ def cold_factors(temperature_c, vehicle: VehicleParams | None = None
         one = np.ones_like(t)
         return one, one.copy()
     k = np.maximum(v.cold_ref_c - t, 0.0)
+    if parked_s is not None:
+        k = k * soak_fraction(parked_s, v.cold_soak_time_constant_s)
     return (1.0 + v.cold_traction_loss_per_k * k,
             1.0 - np.minimum(v.cold_regen_loss_per_k * k, _MAX_REGEN_LOSS))

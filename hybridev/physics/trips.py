@@ -227,7 +227,8 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
     prof = profile_table(cols["mode"], n,
                          ("efficiency_multiplier", "regen_efficiency", "aux_kw"))
     temp = cols["temperature_c"]
-    trac, regen = cold_factors(temp, veh)
+    parked = cols["parked_min"] * 60.0 if "parked_min" in cols else None
+    trac, regen = cold_factors(temp, veh, parked_s=parked)
     mult_eta = (prof["efficiency_multiplier"] * trac / veh.drivetrain_efficiency)[:, None]
     eta_r = (prof["regen_efficiency"] * regen)[:, None]
     aux = (veh.aux_base_kw + hvac_power_kw(temp, veh) + prof["aux_kw"])[:, None]
@@ -236,7 +237,6 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
                          soc_drop_estimate(veh, cols["distance_km"] * 1000.0,
                                            cols["distance_km"] * 3600.0 / cols["avg_speed_kmh"]))
     warm = veh.climate_model == "continuous"
-    parked = cols["parked_min"] * 60.0 if "parked_min" in cols else None
     for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))

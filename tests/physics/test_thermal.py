@@ -203,6 +203,21 @@ def test_a_short_stop_never_needs_more_warmup_than_a_soaked_start(t, parked_s, d
     assert cab == pytest.approx((1 - np.exp(-1)) * warmup_energy_kwh(t, 1e6, CONT), rel=1e-9)
 
 
+@settings(max_examples=100, deadline=None)
+@given(temps, st.floats(0.0, 1e5), st.floats(0.0, 1e5))
+def test_cold_losses_soak_in_with_parking_time(t, p1, p2):
+    lo, hi = sorted((p1, p2))
+    soaked_t, soaked_r = cold_factors(t, CONT)
+    (t_lo, t_hi), (r_lo, r_hi) = cold_factors(t, CONT, parked_s=[lo, hi])
+    assert 1.0 <= t_lo <= t_hi <= soaked_t + 1e-12  # a warm car loses less in the cold
+    assert soaked_r - 1e-12 <= r_hi <= r_lo <= 1.0
+    assert [float(x) for x in cold_factors(t, CONT, parked_s=0.0)] == [1.0, 1.0]
+    assert np.array_equal(cold_factors(t, CONT, parked_s=np.nan)[0], soaked_t)  # NaN: soaked
+    tau = CONT.cold_soak_time_constant_s  # one time constant: ~63 % of the excess
+    assert float(cold_factors(t, CONT, parked_s=tau)[0]) - 1.0 == pytest.approx(
+        (1 - np.exp(-1)) * (float(soaked_t) - 1.0), rel=1e-9, abs=1e-15)
+
+
 def test_parked_min_lowers_winter_energy_and_stats_stay_exact():
     v = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1700.0)
     trips = make_trips(40, seed=3).assign(temperature_c=np.linspace(-20.0, 40.0, 40))
