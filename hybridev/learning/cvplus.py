@@ -67,7 +67,8 @@ from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
 __all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
-           "fit_cv_plus", "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
+           "fit_cv_plus", "fold_diagnostics", "fold_variance", "nets_from_arrays",
+           "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
@@ -165,8 +166,45 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
         dists = [gate.gated(d) for d in dists]
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
+    # scored for the final model's interval (cross): net of the folds' own instability
+    norm = np.sqrt(sd[f_r, idx] ** 2 + fold_variance(mu))
     return (nets, fold_physics if post is not None else [],
-            CVPlusConformal((e_r - mu[f_r, idx]) / sd[f_r, idx], f_r))
+            CVPlusConformal((e_r - mu[f_r, idx]) / norm, f_r))
+
+
+def fold_variance(means: np.ndarray) -> np.ndarray:
+    """How much more a fold model's prediction varies than the final model's, kWh^2.
+
+    Parameters
+    ----------
+    means : numpy.ndarray, shape (J, n)
+        Predictive means (kWh) of ``n`` trips by each of the ``J`` fold models.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        The population variance of the ``J`` predictions of each trip (0 with one fold).
+
+    Notes
+    -----
+    A fold model is fitted on ``(K - 1) / K`` of the groups (days), the final model on
+    all of them. For an estimator whose variance falls as ``1 / n``, the delete-a-group
+    jackknife estimates the final model's variance at a trip as ``(K - 1)`` times the
+    population variance ``v`` of the ``K`` fold predictions there, and a fold model's
+    variance is ``K / (K - 1)`` times the final's: the fold model's squared error exceeds
+    the final model's by ``v``. The out-of-fold scores are therefore normalised by
+    ``sqrt(s^2 + v)`` (``s`` the fold model's predictive spread), so that the quantile
+    they give applies to the final model's ``mu +- q s`` (the cross rule of
+    :class:`~hybridev.learning.calibrate.Calibrator`, and the planned-trip scores of
+    :mod:`hybridev.learning.planned`). With ``J < K`` fold models the variance of the
+    ``J`` is on average the smaller (a conservative correction). On M1
+    (``evaluation/planned_trips``, date-grouped outer folds) the fold models predicted
+    the held-out days worse than the final model, mostly through each fold's own
+    discrepancy stage fitted on fewer days, and the planned intervals built on their
+    raw scores over-covered.
+    """
+    m = np.asarray(means, float)
+    return m.var(axis=0) if m.shape[0] > 1 else np.zeros(m.shape[1:])
 
 
 def _assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSequence):

@@ -25,20 +25,18 @@ cross-fitted (a trip's score uses the correction of the other folds), kept only
 when so it cuts the mean absolute log error by 10 % (else ``coef_`` is zero) and
 held inside the scored trips' speeds and temperatures.
 
-The model's own spread ``s`` (posterior, network members and noise, all
-learned on logged traces) does not know how far a synthesised trace is from
-this car's driving, so it is not the spread of a summary-only error (on M1 the
-summary-only errors are about twice the traced ones, ``evaluation/planned_trips``,
-while ``s`` is the same). The normaliser is
+The model's own spread ``s`` (learned on logged traces) does not know how far a
+synthesised trace is from this car's driving (on M1 the summary-only errors are
+about twice the traced ones, ``evaluation/planned_trips``). The normaliser is
 ``s' = sqrt(s^2 + (c mu)^2)``, with ``c`` the relative spread the scored trips
 show beyond ``s`` (moment estimate on the in-domain scored trips,
-``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)``, ``excess_rel_``). On M1
-(``evaluation/planned_trips``) it cut the mean planned width at the same
-coverage (sharpness ratio about 1.3 with ``s`` alone).
+``c^2 = max(mean(((E - mu)^2 - s^2 - v) / mu^2), 0)``, ``excess_rel_``). The CV+ fold
+models that score the trips vary more than the final model by ``v``
+(:func:`~hybridev.learning.cvplus.fold_variance`), so the scores are
+``(E - mu) / sqrt(s'^2 + v)``: their quantile applies to the final model's ``s'``.
 
-The signed normalised scores ``(E - mu) / s'`` (``mu`` and ``s`` the corrected
-summary-only predictive mean and standard deviation of the scoring model) make
-a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
+These scores (``mu`` and ``s`` the corrected summary-only predictive mean and
+spread of the scoring model) make a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
 conformal interval ``mu +- q s'`` with the final model's summary-only ``mu``
 and ``s'`` and ``q`` the conformal quantile of the scores of the scored trips
 *inside their fold's training domain* (``fold_gaps <= 1``); trips outside it
@@ -127,8 +125,8 @@ class PlannedTripCalibrator:
 
     MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
 
-    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None
-            ) -> PlannedTripCalibrator:
+    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None,
+            fold_var=None) -> PlannedTripCalibrator:
         """Scores (and the mean correction) from measured energies and summary-only predictions.
 
         Parameters
@@ -146,8 +144,12 @@ class PlannedTripCalibrator:
             consecutive trips).
         trace_gap : TraceGap, optional
             Kept as ``trace_gap_`` (``mean`` and ``std`` already carry its factor).
+        fold_var : array_like, shape (n,), kWh^2, optional
+            ``v``, how much more the scoring fold models' predictions vary than the final
+            model's (:func:`~hybridev.learning.cvplus.fold_variance`; default 0).
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+        v = np.zeros(len(y)) if fold_var is None else np.asarray(fold_var, float)
         self.graded_ = None  # set by the fit (hybridev.learning.fitting.fit_planned)
         self.trace_gap_ = trace_gap
         self.coef_ = np.zeros(len(_CORRECTION_TERMS))
@@ -166,15 +168,15 @@ class PlannedTripCalibrator:
             # kept only when it clearly helps out of fold (on M1 the networks leave no
             # bias to correct, and an offset corrected from the other days adds error)
             if np.mean(np.abs(lr - np.log(factor))) < _MIN_GAIN * np.mean(np.abs(lr)):
-                mean, std = mean * factor, std * factor
+                mean, std, v = mean * factor, std * factor, v * factor**2
                 self.coef_ = _ridge(c, lr)
                 self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
         g = np.zeros(len(y)) if gap is None else np.asarray(gap, float)
         if g.shape != y.shape:
             raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
-        self.excess_rel_ = _excess_rel(y, mean, std, self._inside(g))
-        cp = NormalizedConformal.fit(y, mean, self._normaliser(mean, std))
+        self.excess_rel_ = _excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
+        cp = NormalizedConformal.fit(y, mean, np.sqrt(self._normaliser(mean, std) ** 2 + v))
         self.residuals_, self.gap_ = cp.residuals, g
         self._build()
         return self
