@@ -224,7 +224,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     conformal step scored (CV+: the held-out trips of every fitted fold, by the fold
     model that did not see their day;
     split: the held-out trips by the final model) are predicted again *without* their
-    traces, against their measured energy (and, when the traces log elevation, again
+    traces, against their measured energy (CV+: net of the fold models' extra variance,
+    :func:`~hybridev.learning.cvplus.fold_variance`) (and, when the traces log elevation, again
     with their logged net grade: ``planned.graded_``, for planned trips given a
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
