@@ -266,7 +266,7 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                     rows, means = np.arange(len(idx)), np.stack([d.mean() for d in dists])
                     return (means[fold[idx], rows],
                             np.stack([d.std() for d in dists])[fold[idx], rows],
-                            fold_variance(means))
+                            fold_variance(means, len(np.unique(split.codes[idx]))))
                 dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
                 return dist.mean(), dist.std(), np.zeros(len(idx))
 
