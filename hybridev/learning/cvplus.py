@@ -208,8 +208,7 @@ def fold_variance(means: np.ndarray, n_groups: int) -> np.ndarray:
     pooled (the median relative one) rather than each trip's own: a scored trip is
     in-sample for the other folds' models, which its measured energy pulls towards it,
     so its own variance grows with its own error, and normalising each score by it
-    would shrink the largest scores most (on M1 at 20 training trips the traced
-    intervals then under-covered). On M1
+    would shrink the largest scores most. On M1
     (``evaluation/planned_trips``, date-grouped outer folds) the fold models predicted
     the held-out days worse than the final model, mostly through each fold's own
     discrepancy stage fitted on fewer days, and the planned intervals built on their
