@@ -208,11 +208,10 @@ def fold_variance(means: np.ndarray, n_groups: int) -> np.ndarray:
     pooled (the median relative one) rather than each trip's own: a scored trip is
     in-sample for the other folds' models, which its measured energy pulls towards it,
     so its own variance grows with its own error, and normalising each score by it
-    would shrink the largest scores most. On M1
-    (``evaluation/planned_trips``, date-grouped outer folds) the fold models predicted
-    the held-out days worse than the final model, mostly through each fold's own
-    discrepancy stage fitted on fewer days, and the planned intervals built on their
-    raw scores over-covered.
+    would shrink the largest scores most. Without it the planned intervals on M1
+    (``evaluation/planned_trips``, date-grouped outer folds) over-covered: a fold's own
+    physics (posterior and discrepancy stage) is fitted on fewer days than the final
+    model's.
     """
     m = np.asarray(means, float)
     if m.shape[0] < 2 or m.shape[1] == 0 or n_groups < MIN_GROUPS:
