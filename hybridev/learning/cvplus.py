@@ -67,7 +67,8 @@ from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
 __all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
-           "fit_cv_plus", "fold_diagnostics", "nets_from_arrays", "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
+           "fit_cv_plus", "fold_diagnostics", "fold_variance", "nets_from_arrays",
+           "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
@@ -165,8 +166,58 @@ def fit_cv_plus(physics, learner, raw_distributions, good, traces, codes: np.nda
         dists = [gate.gated(d) for d in dists]
     mu = np.stack([d.mean() for d in dists])
     sd = np.maximum(np.stack([d.std() for d in dists]), 1e-12)
+    # scored for the final model's interval (cross): net of the folds' own instability
+    norm = np.sqrt(sd[f_r, idx] ** 2 + fold_variance(mu, len(np.unique(codes[rows]))))
     return (nets, fold_physics if post is not None else [],
-            CVPlusConformal((e_r - mu[f_r, idx]) / sd[f_r, idx], f_r))
+            CVPlusConformal((e_r - mu[f_r, idx]) / norm, f_r))
+
+
+def fold_variance(means: np.ndarray, n_groups: int) -> np.ndarray:
+    """How much more a fold model's prediction varies than the final model's, kWh^2.
+
+    Parameters
+    ----------
+    means : numpy.ndarray, shape (J, n)
+        Predictive means (kWh) of ``n`` trips by each of the ``J`` fold models.
+    n_groups : int
+        Groups (days) among the scored trips: with fewer than :data:`MIN_GROUPS` the
+        variance is 0 (the raw scores, as their coverage of new days is then poorly
+        determined: :func:`warn_calibration` warns, and a spread over so few days is
+        not subtracted from them).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        ``r m^2``: ``m`` the trip's mean prediction over the folds and ``r`` the median
+        over the trips of the population variance of the ``J`` predictions relative to
+        ``m^2`` (0 with one fold or fewer than :data:`MIN_GROUPS` groups).
+
+    Notes
+    -----
+    A fold model is fitted on ``(K - 1) / K`` of the groups (days), the final model on
+    all of them. For an estimator whose variance falls as ``1 / n``, the delete-a-group
+    jackknife estimates the final model's variance at a trip as ``(K - 1)`` times the
+    population variance ``v`` of the ``K`` fold predictions there, and a fold model's
+    variance is ``K / (K - 1)`` times the final's: the fold model's squared error exceeds
+    the final model's by ``v``. The out-of-fold scores are therefore normalised by
+    ``sqrt(s^2 + v)`` (``s`` the fold model's predictive spread), so that the quantile
+    they give applies to the final model's ``mu +- q s`` (the cross rule of
+    :class:`~hybridev.learning.calibrate.Calibrator`, and the planned-trip scores of
+    :mod:`hybridev.learning.planned`). With ``J < K`` fold models the variance of the
+    ``J`` is on average the smaller (a conservative correction). The variance is
+    pooled (the median relative one) rather than each trip's own: a scored trip is
+    in-sample for the other folds' models, which its measured energy pulls towards it,
+    so its own variance grows with its own error, and normalising each score by it
+    would shrink the largest scores most. Without it the planned intervals on M1
+    (``evaluation/planned_trips``, date-grouped outer folds) over-covered: a fold's own
+    physics (posterior and discrepancy stage) is fitted on fewer days than the final
+    model's.
+    """
+    m = np.asarray(means, float)
+    if m.shape[0] < 2 or m.shape[1] == 0 or n_groups < MIN_GROUPS:
+        return np.zeros(m.shape[1:])
+    centre2 = np.maximum(m.mean(axis=0) ** 2, 1e-300)
+    return float(np.median(m.var(axis=0) / centre2)) * centre2
 
 
 def _assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSequence):

@@ -30,6 +30,7 @@ from hybridev.learning.cvplus import (
     cv_fold_assignment,
     fit_cv_plus,
     fold_diagnostics,
+    fold_variance,
     warn_calibration,
 )
 from hybridev.learning.domain import TrainingDomain, domain_quantities
@@ -223,7 +224,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     conformal step scored (CV+: the held-out trips of every fitted fold, by the fold
     model that did not see their day;
     split: the held-out trips by the final model) are predicted again *without* their
-    traces, against their measured energy (and, when the traces log elevation, again
+    traces, against their measured energy (CV+: net of the fold models' extra variance,
+    :func:`~hybridev.learning.cvplus.fold_variance`) (and, when the traces log elevation, again
     with their logged net grade: ``planned.graded_``, for planned trips given a
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
@@ -261,14 +263,15 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                 if cv:
                     dists = raw_distributions(model, trips.iloc[idx], None, seed=int(seed),
                                               nets=cv, physics=cal.fold_physics_ or None)[0]
-                    rows = np.arange(len(idx))
-                    return (np.stack([d.mean() for d in dists])[fold[idx], rows],
-                            np.stack([d.std() for d in dists])[fold[idx], rows])
+                    rows, means = np.arange(len(idx)), np.stack([d.mean() for d in dists])
+                    return (means[fold[idx], rows],
+                            np.stack([d.std() for d in dists])[fold[idx], rows],
+                            fold_variance(means, len(np.unique(split.codes[idx]))))
                 dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
-                return dist.mean(), dist.std()
+                return dist.mean(), dist.std(), np.zeros(len(idx))
 
         def calibrator(trips, elevation=None):
-            mu, sd = scored(trips)
+            mu, sd, v = scored(trips)
             # the trace gap never sees the measured energy: the scores use the final one
             gap = fit_trace_gap(model, trips, traces, elevation, e_log=e_log)
             factor = gap.factor(trips["avg_speed_kmh"].to_numpy(float), elevation)
@@ -276,7 +279,7 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                 e_meas[idx], mu * factor[idx], np.maximum(sd * factor[idx], 1e-12), g_plan,
                 conditions=conditions_of(trips.iloc[idx]),
                 fold=fold[idx] if len(cv) > 1 else None,  # one fold: blocks, as split
-                trace_gap=gap)
+                trace_gap=gap, fold_var=v * factor[idx] ** 2)
 
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))

@@ -25,24 +25,21 @@ cross-fitted (a trip's score uses the correction of the other folds), kept only
 when so it cuts the mean absolute log error by 10 % (else ``coef_`` is zero) and
 held inside the scored trips' speeds and temperatures.
 
-The model's own spread ``s`` (posterior, network members and noise, all
-learned on logged traces) does not know how far a synthesised trace is from
-this car's driving, so it is not the spread of a summary-only error (on M1 the
-summary-only errors are about twice the traced ones, ``evaluation/planned_trips``,
-while ``s`` is the same). The normaliser is
+The model's own spread ``s`` (learned on logged traces) does not know how far a
+synthesised trace is from this car's driving (on M1 the summary-only errors are
+about twice the traced ones, ``evaluation/planned_trips``). The normaliser is
 ``s' = sqrt(s^2 + (c mu)^2)``, with ``c`` the relative spread the scored trips
 show beyond ``s`` (moment estimate on the in-domain scored trips,
-``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)``, ``excess_rel_``). On M1
-(``evaluation/planned_trips``) it cut the mean planned width at the same
-coverage (sharpness ratio about 1.3 with ``s`` alone).
+``c^2 = max(mean(((E - mu)^2 - s^2 - v) / mu^2), 0)``, ``excess_rel_``). The CV+ fold
+models that score the trips vary more than the final model by ``v``
+(:func:`~hybridev.learning.cvplus.fold_variance`), so the scores are
+``(E - mu) / sqrt(s'^2 + v)``: their quantile applies to the final model's ``s'``.
 
-The signed normalised scores ``(E - mu) / s'`` (``mu`` and ``s`` the corrected
-summary-only predictive mean and standard deviation of the scoring model) make
-a :class:`PlannedTripCalibrator`. A planned trip's interval is the normalised
-conformal interval ``mu +- q s'`` with the final model's summary-only ``mu``
-and ``s'`` and ``q`` the conformal quantile of the scores of the scored trips
-*inside their fold's training domain* (``fold_gaps <= 1``); trips outside it
-teach the widening rate instead (:mod:`hybridev.learning.shift`).
+These scores (``mu``, ``s``: the scoring model's) make a :class:`PlannedTripCalibrator`.
+A planned trip's interval is ``mu +- q s'`` with the final model's ``mu`` and ``s'``
+and ``q`` the smoothed quantile (:mod:`hybridev.learning.smoothed`: few scores from
+few days) of the scored trips *inside their fold's training domain* (``fold_gaps <=
+1``); trips outside it teach the widening rate instead (:mod:`hybridev.learning.shift`).
 :meth:`HybridModel.predict_distribution` scales the spread of a planned trip
 by :meth:`PlannedTripCalibrator.spread_factor` times ``s' / s`` (range and charging
 use it).
@@ -75,6 +72,7 @@ import pandas as pd
 
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.predictive import raw_prediction
+from hybridev.learning.smoothed import SmoothedConformal
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
 from hybridev.learning.trace_gap import (
     TraceGap,
@@ -98,9 +96,10 @@ class PlannedTripCalibrator:
         trips predicted without their traces.
     gap_ : numpy.ndarray, shape (n,)
         Each scored trip's largest intensive gap to its fold's training domain.
-    conformal_ : NormalizedConformal
+    conformal_ : SmoothedConformal
         The scores used for intervals: those with ``gap_ <= 1`` when at least
-        :data:`MIN_INSIDE` of them, else all.
+        :data:`MIN_INSIDE` of them, else all (``smoothed_`` False, files saved before
+        it: a NormalizedConformal).
     graded_ : PlannedTripCalibrator or None
         The same calibration with the scored trips given their logged net grade
         (``grade_pct``): it serves the planned trips given a ``grade_pct``, this one
@@ -126,9 +125,10 @@ class PlannedTripCalibrator:
     """
 
     MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
+    smoothed_ = False  # files saved before the smoothed quantile: the order statistic
 
-    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None
-            ) -> PlannedTripCalibrator:
+    def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None,
+            fold_var=None) -> PlannedTripCalibrator:
         """Scores (and the mean correction) from measured energies and summary-only predictions.
 
         Parameters
@@ -146,8 +146,12 @@ class PlannedTripCalibrator:
             consecutive trips).
         trace_gap : TraceGap, optional
             Kept as ``trace_gap_`` (``mean`` and ``std`` already carry its factor).
+        fold_var : array_like, shape (n,), kWh^2, optional
+            ``v``, how much more the scoring fold models' predictions vary than the final
+            model's (:func:`~hybridev.learning.cvplus.fold_variance`; default 0).
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+        v = np.zeros(len(y)) if fold_var is None else np.asarray(fold_var, float)
         self.graded_ = None  # set by the fit (hybridev.learning.fitting.fit_planned)
         self.trace_gap_ = trace_gap
         self.coef_ = np.zeros(len(_CORRECTION_TERMS))
@@ -162,20 +166,21 @@ class PlannedTripCalibrator:
                 rest = fold != f
                 if rest.sum() >= 2 * len(_CORRECTION_TERMS):
                     held = np.clip(c[~rest], c[rest].min(axis=0), c[rest].max(axis=0))
-                    factor[~rest] = np.exp(_design(held) @ _ridge(c[rest], lr[rest]))
+                    factor[~rest] = np.exp(_design(held) @ ridge_fit(_design(c[rest]),
+                                                                     lr[rest]))
             # kept only when it clearly helps out of fold (on M1 the networks leave no
             # bias to correct, and an offset corrected from the other days adds error)
             if np.mean(np.abs(lr - np.log(factor))) < _MIN_GAIN * np.mean(np.abs(lr)):
-                mean, std = mean * factor, std * factor
-                self.coef_ = _ridge(c, lr)
+                mean, std, v = mean * factor, std * factor, v * factor**2
+                self.coef_ = ridge_fit(_design(c), lr)
                 self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
         g = np.zeros(len(y)) if gap is None else np.asarray(gap, float)
         if g.shape != y.shape:
             raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
-        self.excess_rel_ = _excess_rel(y, mean, std, self._inside(g))
-        cp = NormalizedConformal.fit(y, mean, self._normaliser(mean, std))
-        self.residuals_, self.gap_ = cp.residuals, g
+        self.excess_rel_ = _excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
+        cp = NormalizedConformal.fit(y, mean, np.sqrt(self._normaliser(mean, std) ** 2 + v))
+        self.residuals_, self.gap_, self.smoothed_ = cp.residuals, g, True
         self._build()
         return self
 
@@ -186,7 +191,8 @@ class PlannedTripCalibrator:
         return inside if inside.sum() >= self.MIN_INSIDE else np.ones(len(gap), dtype=bool)
 
     def _build(self) -> None:
-        self.conformal_ = NormalizedConformal(self.residuals_[self._inside(self.gap_)])
+        rule = SmoothedConformal if self.smoothed_ else NormalizedConformal
+        self.conformal_ = rule(self.residuals_[self._inside(self.gap_)])
 
     def _normaliser(self, mean, std) -> np.ndarray:
         """Spread of a summary-only prediction (kWh): ``sqrt(s^2 + (c mu)^2)``."""
@@ -352,6 +358,7 @@ class PlannedTripCalibrator:
         return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
                 "conditions_range": self.conditions_range_,
                 "excess_rel": np.array([self.excess_rel_]),
+                "smoothed": np.array([float(self.smoothed_)]),
                 **{f"trace_gap.{k}": v for k, v in self._gap_arrays().items()},
                 **{f"graded.{k}": v for k, v in (self.graded_.to_arrays().items()
                                                   if self.graded_ is not None else ())}}
@@ -385,6 +392,7 @@ class PlannedTripCalibrator:
         out = cls()
         out.residuals_, out.gap_, out.coef_, out.conditions_range_ = r, g, coef, rng_
         out.excess_rel_ = float(c[0])
+        out.smoothed_ = bool(np.any(np.asarray(a.get("smoothed", 0.0), float)))  # older: no
         graded = {k[len("graded."):]: v for k, v in a.items() if k.startswith("graded.")}
         out.graded_ = cls.from_arrays(graded) if graded else None  # older files: none
         gap = {k[len("trace_gap."):]: v for k, v in a.items() if k.startswith("trace_gap.")}
@@ -410,9 +418,3 @@ def _design(conditions: np.ndarray) -> np.ndarray:
     c = np.atleast_2d(conditions)
     return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)),
                             c[:, 1] / 10.0])
-
-
-def _ridge(conditions: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Ridge coefficients of ``target`` on :func:`_design` (:func:`~hybridev.learning.
-    trace_gap.ridge_fit`)."""
-    return ridge_fit(_design(conditions), target)

@@ -214,3 +214,32 @@ def test_partial_folds_score_only_their_trips_and_survive_save_load(data, tmp_pa
     cols = ["energy_kwh_lo", "energy_kwh_hi"]
     assert np.isfinite(a[cols].to_numpy()).all()
     np.testing.assert_allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-5)
+
+
+def test_fold_variance_is_the_fold_models_extra_squared_error():
+    """Least squares with 8 inputs on 40 trips, 5 folds: on new trips the fold models'
+    mean squared error exceeds the final model's by about the (pooled) population
+    variance of the fold predictions (the grouped jackknife); one fold has none."""
+    from hybridev.learning.cvplus import fold_variance
+
+    assert np.array_equal(fold_variance(np.ones((1, 4)), 40), np.zeros(4))
+    spread = np.array([[1.0, 1.0, 1.0], [3.0, 1.0, 3.0]])
+    assert np.array_equal(fold_variance(spread, 4), np.zeros(3))  # under MIN_GROUPS days
+    # pooled: the median relative variance (0.25, 0, 0.25 -> 0.25) times each trip's m^2
+    np.testing.assert_allclose(fold_variance(spread, 5), [1.0, 0.25, 1.0])
+    rng = np.random.default_rng(0)
+    excess, v = [], []
+    for _ in range(400):
+        beta = rng.standard_normal(8)
+        x, xn = rng.standard_normal((40, 8)), rng.standard_normal((200, 8))
+        x[:, 0] = xn[:, 0] = 1.0  # an intercept: energies far from 0, as trips'
+        beta[0] = 10.0
+        y, yn = x @ beta + rng.standard_normal(40), xn @ beta + rng.standard_normal(200)
+        final = xn @ np.linalg.lstsq(x, y, rcond=None)[0]
+        fold = np.arange(40) % 5
+        means = np.stack([xn @ np.linalg.lstsq(x[fold != f], y[fold != f], rcond=None)[0]
+                          for f in range(5)])
+        excess.append(np.mean((yn - means) ** 2) - np.mean((yn - final) ** 2))
+        v.append(fold_variance(means, 40).mean())
+    assert np.mean(v) == pytest.approx(np.mean(excess), rel=0.25)
+    assert np.mean(excess) > 0.02  # the effect is there to be measured

@@ -394,3 +394,31 @@ def test_trips_given_a_grade_use_the_scores_with_the_logged_grade(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         pd.testing.assert_frame_equal(back.predict_interval(x, 0.9), out)
+
+
+def test_scores_are_net_of_the_fold_models_extra_variance_and_old_files_keep_the_rule():
+    """Fold models that vary by v more than the final model: the scores are normalised by
+    sqrt(s'^2 + v) and c is net of v; the quantile is the smoothed one, and state saved
+    before it (no ``smoothed``) keeps the order statistic."""
+    from hybridev.learning.smoothed import SmoothedConformal
+
+    rng = np.random.default_rng(8)
+    n = 400
+    mu = rng.uniform(2.0, 20.0, n)
+    s = 0.02 * mu
+    v = (0.06 * mu) ** 2
+    y = mu * (1.0 + 0.1 * rng.standard_normal(n))
+    cal = PlannedTripCalibrator().fit(y, mu, s, fold_var=v)
+    plain = PlannedTripCalibrator().fit(y, mu, s)
+    # c: sqrt(0.1^2 - 0.02^2 - 0.06^2) = 0.077 net of v, 0.098 without
+    assert 0.065 < cal.excess_rel_ < 0.09 < plain.excess_rel_
+    np.testing.assert_allclose(cal.residuals_, (y - mu) / np.sqrt(
+        s**2 + (cal.excess_rel_ * mu) ** 2 + v))
+    final = mu * (1.0 + 0.08 * rng.standard_normal(n))  # the final model's errors: net of v
+    lo, hi = cal.interval(mu, s, 0.9)
+    assert 0.86 <= np.mean((final >= lo) & (final <= hi)) <= 0.94
+    assert isinstance(cal.conformal_, SmoothedConformal)
+    assert PlannedTripCalibrator.from_arrays(cal.to_arrays()).quantile(0.9) == cal.quantile(0.9)
+    old = {k: v for k, v in cal.to_arrays().items() if k != "smoothed"}
+    before = PlannedTripCalibrator.from_arrays(old)
+    assert before.quantile(0.9) == NormalizedConformal(cal.residuals_).quantile(0.9)
