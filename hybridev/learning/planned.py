@@ -22,8 +22,9 @@ predictions may be biased by conditions: a multiplicative correction
 ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` km/h, ``T`` °C) is ridge-fitted to the
 out-of-fold ``ln(E / mu)`` and scales the summary-only distribution. It is
 cross-fitted (a trip's score uses the correction of the other folds), kept only
-when so it cuts the mean absolute log error by 10 % (else ``coef_`` is zero) and
-held inside the scored trips' speeds and temperatures.
+when so it cuts the mean absolute log error by 10 % and makes no fold (group of
+days) worse (else ``coef_`` is zero), and held inside the scored trips' speeds and
+temperatures.
 
 The model's own spread ``s`` (learned on logged traces) does not know how far a
 synthesised trace is from this car's driving (on M1 the summary-only errors are
@@ -71,6 +72,13 @@ import numpy as np
 import pandas as pd
 
 from hybridev.learning.conformal import NormalizedConformal
+from hybridev.learning.planned_bias import (
+    CORRECTION_TERMS,
+    correction_design,
+    correction_helps,
+    cross_fitted_log_factor,
+    excess_rel,
+)
 from hybridev.learning.predictive import raw_prediction
 from hybridev.learning.smoothed import SmoothedConformal
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
@@ -154,31 +162,26 @@ class PlannedTripCalibrator:
         v = np.zeros(len(y)) if fold_var is None else np.asarray(fold_var, float)
         self.graded_ = None  # set by the fit (hybridev.learning.fitting.fit_planned)
         self.trace_gap_ = trace_gap
-        self.coef_ = np.zeros(len(_CORRECTION_TERMS))
+        self.coef_ = np.zeros(len(CORRECTION_TERMS))
         self.conditions_range_ = np.array([[0.0, -273.15], [np.inf, np.inf]])
         if conditions is not None:
             c = np.asarray(conditions, float)
             lr = np.log(np.maximum(y, 1e-9) / np.maximum(mean, 1e-9))
             fold = (np.arange(len(y)) * 5 // max(len(y), 1) if fold is None
                     else np.asarray(fold, int))
-            factor = np.ones(len(y))
-            for f in np.unique(fold):  # cross-fitted: each trip corrected out of fold
-                rest = fold != f
-                if rest.sum() >= 2 * len(_CORRECTION_TERMS):
-                    held = np.clip(c[~rest], c[rest].min(axis=0), c[rest].max(axis=0))
-                    factor[~rest] = np.exp(_design(held) @ ridge_fit(_design(c[rest]),
-                                                                     lr[rest]))
-            # kept only when it clearly helps out of fold (on M1 the networks leave no
-            # bias to correct, and an offset corrected from the other days adds error)
-            if np.mean(np.abs(lr - np.log(factor))) < _MIN_GAIN * np.mean(np.abs(lr)):
+            factor = np.exp(cross_fitted_log_factor(c, lr, fold))
+            # kept only when it clearly helps out of fold, and on every fold (days): on M1
+            # the networks leave no bias to correct, and a trend fitted on a few days and
+            # carried to others adds error where it does not hold
+            if correction_helps(lr, np.log(factor), fold):
                 mean, std, v = mean * factor, std * factor, v * factor**2
-                self.coef_ = ridge_fit(_design(c), lr)
+                self.coef_ = ridge_fit(correction_design(c), lr)
                 self.conditions_range_ = np.vstack([c.min(axis=0), c.max(axis=0)])
         g = np.zeros(len(y)) if gap is None else np.asarray(gap, float)
         if g.shape != y.shape:
             raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
-        self.excess_rel_ = _excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
+        self.excess_rel_ = excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
         cp = NormalizedConformal.fit(y, mean, np.sqrt(self._normaliser(mean, std) ** 2 + v))
         self.residuals_, self.gap_, self.smoothed_ = cp.residuals, g, True
         self._build()
@@ -207,7 +210,7 @@ class PlannedTripCalibrator:
         """
         lo, hi = self.conditions_range_
         held = np.clip(np.atleast_2d(np.asarray(conditions, float)), lo, hi)
-        return np.exp(_design(held) @ self.coef_)
+        return np.exp(correction_design(held) @ self.coef_)
 
     @property
     def n_calibration(self) -> int:
@@ -377,10 +380,10 @@ class PlannedTripCalibrator:
         if r.shape != g.shape or r.ndim != 1 or not np.all(np.isfinite(g)):
             raise ValueError("planned-trip calibration: residuals and gap must be 1-D arrays "
                              f"of equal length; got {r.shape}, {g.shape}")
-        coef = np.asarray(a.get("coef", np.zeros(len(_CORRECTION_TERMS))), float)
-        if coef.shape != (len(_CORRECTION_TERMS),) or not np.all(np.isfinite(coef)):
+        coef = np.asarray(a.get("coef", np.zeros(len(CORRECTION_TERMS))), float)
+        if coef.shape != (len(CORRECTION_TERMS),) or not np.all(np.isfinite(coef)):
             raise ValueError(f"planned-trip calibration: coef must be "
-                             f"{len(_CORRECTION_TERMS)} finite values; got {coef!r}")
+                             f"{len(CORRECTION_TERMS)} finite values; got {coef!r}")
         rng_ = np.asarray(a.get("conditions_range", [[0.0, -273.15], [np.inf, np.inf]]), float)
         if rng_.shape != (2, 2):
             raise ValueError(f"planned-trip calibration: conditions_range must be (2, 2); "
@@ -399,22 +402,3 @@ class PlannedTripCalibrator:
         out.trace_gap_ = TraceGap.from_arrays(gap) if gap else None  # older files: none
         out._build()
         return out
-
-
-_CORRECTION_TERMS = ("1", "ln_speed", "temperature_10")
-_MIN_GAIN = 0.9  # the correction must cut the cross-fitted mean |log error| by 10 %
-
-
-def _excess_rel(y: np.ndarray, mean: np.ndarray, std: np.ndarray, inside: np.ndarray
-                ) -> float:
-    """Relative spread ``c`` the scored trips' errors show beyond the model's own:
-    ``c^2 = max(mean(((E - mu)^2 - s^2) / mu^2), 0)`` over ``inside`` (moment estimate)."""
-    mu = np.maximum(np.abs(mean[inside]), 1e-9)
-    return float(np.sqrt(max(np.mean(((y - mean) ** 2 - std**2)[inside] / mu**2), 0.0)))
-
-
-def _design(conditions: np.ndarray) -> np.ndarray:
-    """Columns of :data:`_CORRECTION_TERMS` from (n, 2) speed (km/h), temperature (°C)."""
-    c = np.atleast_2d(conditions)
-    return np.column_stack([np.ones(len(c)), np.log(np.maximum(c[:, 0], 1.0)),
-                            c[:, 1] / 10.0])

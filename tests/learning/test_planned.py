@@ -422,3 +422,20 @@ def test_scores_are_net_of_the_fold_models_extra_variance_and_old_files_keep_the
     old = {k: v for k, v in cal.to_arrays().items() if k != "smoothed"}
     before = PlannedTripCalibrator.from_arrays(old)
     assert before.quantile(0.9) == NormalizedConformal(cal.residuals_).quantile(0.9)
+
+
+def test_planned_mean_correction_is_dropped_when_a_fold_gets_worse():
+    """A speed trend that holds on four groups of days and reverses on the fifth: the
+    pooled cross-fitted error falls, but the fifth fold's grows, so it is not kept."""
+    rng = np.random.default_rng(5)
+    n = 200
+    fold = np.arange(n) % 5
+    speed, temp = rng.uniform(20.0, 90.0, n), rng.uniform(0.0, 25.0, n)
+    mean = rng.uniform(1.0, 6.0, n)
+    slope = np.where(fold == 4, -0.15, 0.15)
+    y = mean * (1.0 + slope * (90.0 - speed) / 70.0) * (1.0 + 0.01 * rng.standard_normal(n))
+    cond = np.column_stack([speed, temp])
+    kept = PlannedTripCalibrator().fit(y, mean, 0.05 * mean, conditions=cond)
+    assert np.any(kept.coef_ != 0)  # blocks of trips mix the fifth group in: kept
+    cal = PlannedTripCalibrator().fit(y, mean, 0.05 * mean, conditions=cond, fold=fold)
+    np.testing.assert_array_equal(cal.coef_, 0.0)
