@@ -195,8 +195,11 @@ def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     (out / "notes.txt").write_text("the user's")
-    r = _py(["-m", "hybridev.cli", "demo", "--quick", "--quiet", "--out", str(out)],
-            fault="merge.moved:SIGKILL", timeout=1800)
+    # the demo's merge of its outputs, on 300 trips rather than the CLI's 1,500 (the same
+    # stages and files; tests/apps/test_demo.py runs the CLI's size): killed mid-merge
+    code = ("import sys; from hybridev.apps.demo import run_demo; "
+            "run_demo(sys.argv[1], quick=True, n_trips=300, echo=lambda s: None)")
+    r = _py(["-c", code, str(out)], fault="merge.moved:SIGKILL", timeout=1800)
     assert r.returncode == -signal.SIGKILL, r.stderr
     assert any(n.startswith(".hybridev-merge.") for n in os.listdir(out))  # the journal
     check_output(out, kind="merge_dir", names=DEMO_OUTPUTS, legacy=_legacy_demo)  # next start
