@@ -162,14 +162,29 @@ def test_prediction_file(files, made, tmp_path, step, sig):
     _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE}, made, "pred")
 
 
+@pytest.fixture(scope="module")
+def scheduler():
+    """The address of one single-worker dask cluster shared by the fleet cases.
+
+    Each killed run and each next run is a fresh ``hybridev predict`` process that
+    writes the fleet folder; they score on this cluster (``--scheduler``) rather than
+    each starting its own worker process, which imports torch and hybridev for its
+    first task. (The fleet how-to page, run by ``tests/docs/test_guides.py`` with
+    ``-m slow``, runs ``hybridev predict --workers 2`` on its own cluster.)"""
+    pytest.importorskip("dask.distributed")
+    from hybridev.fleet.cluster import local_cluster
+
+    cluster = local_cluster(1, memory_limit="2GiB")
+    yield cluster.scheduler_address
+    cluster.close()
+
+
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_fleet_folder(files, made, tmp_path, step, sig):
-    pytest.importorskip("dask.distributed")
-
+def test_fleet_folder(files, made, scheduler, tmp_path, step, sig):
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
-                    "--out", str(path), "--workers", "1"], fault)
+                    "--out", str(path), "--scheduler", scheduler], fault)
 
     _case(write, tmp_path / "out" / "preds", step, sig, {"preds"}, made, "fleet")
 
@@ -195,8 +210,11 @@ def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     (out / "notes.txt").write_text("the user's")
-    r = _py(["-m", "hybridev.cli", "demo", "--quick", "--quiet", "--out", str(out)],
-            fault="merge.moved:SIGKILL", timeout=1800)
+    # the demo's merge of its outputs, on 300 trips rather than the CLI's 1,500 (the same
+    # stages and files; tests/apps/test_demo.py runs the CLI's size): killed mid-merge
+    code = ("import sys; from hybridev.apps.demo import run_demo; "
+            "run_demo(sys.argv[1], quick=True, n_trips=300, echo=lambda s: None)")
+    r = _py(["-c", code, str(out)], fault="merge.moved:SIGKILL", timeout=1800)
     assert r.returncode == -signal.SIGKILL, r.stderr
     assert any(n.startswith(".hybridev-merge.") for n in os.listdir(out))  # the journal
     check_output(out, kind="merge_dir", names=DEMO_OUTPUTS, legacy=_legacy_demo)  # next start
