@@ -28,16 +28,16 @@ Set-up (every number in the output comes from this script):
   1. **in-domain**: the driver's history, ``HISTORY_WEEKS`` past weeks of
      :func:`hybridev.apps.demo.example_schedule` (seeds ``1000 + 100 s + w``,
      ``s = 100 + r``;
-     commutes, errands, a weekend trip; daily temperature ~ N(2, 4) degC),
+     commutes, errands, a weekend trip; daily temperature ~ N(2, 4) °C),
      departure SoC uniform on [0.2, 1.0], energies from the truth with speed
      traces and noise of seed ``100 + r``. The planned weeks come from the
      same routine, so they lie inside what the model has seen.
   2. **out-of-domain**: ``make_dataset(N_OOD_TRIPS, truth="structured",
-     seed=100 + r)``, the paper's design (temperatures -5, 20 and 32 degC
+     seed=100 + r)``, the paper's design (temperatures -5, 20 and 32 °C
      only, speeds 40-120 km/h, 20-200 km). The planned weeks' temperatures
      (range in the output) lie mostly between its temperatures: interpolated,
      in the domain, widened at the model's interpolation rate
-     (:class:`hybridev.learning.shift.GapRate`); the days colder than -5 degC
+     (:class:`hybridev.learning.shift.GapRate`); the days colder than -5 °C
      and the errands at 35 km/h lie beyond its conditions, so the model flags
      them and widens (:mod:`hybridev.learning.ood`). Reported apart, not as
      the headline.
@@ -446,7 +446,7 @@ default `HybridModel()` with its own seeds (its speed traces independent of the 
 {SCHEDULES} planned weeks it never saw (example routine, 7.4 kW charger, SoC 0.5 at the start,
 soc_min 0.1), each plan assessed against the truth on {N_EVAL:,} joint scenarios with independent
 trips (speed trace and noise). The planned weeks' temperatures run from {temps.min():.1f} to
-{temps.max():.1f} degC (median {np.median(temps):.1f} degC).
+{temps.max():.1f} °C (median {np.median(temps):.1f} °C).
 
 ## Headline: achieved risk against the truth at target 0.05
 
@@ -458,7 +458,7 @@ over replicates.
 |---|---|---|---|---|---|
 | in-domain | {int(dsel['in-domain'].n_train)} trips: {HISTORY_WEEKS} weeks of the same routine; `VehicleParams()` (the truth's band climate; its road load and mass 8-10 % off) | {ind['mean']:.4f} +- {ind['se']:.4f} | {ind['min']:.4f} - {ind['max']:.4f} | **{yes[ind['on_target']]}** | {ind['cost_vs_risk_neutral']:.3f} |
 | {NEW_USER} | the same trips; `VehicleParams.from_coastdown(...)` of the nominal road load (continuous climate) | {nu['mean']:.4f} +- {nu['se']:.4f} | {nu['min']:.4f} - {nu['max']:.4f} | **{yes[nu['on_target']]}** | {nu['cost_vs_risk_neutral']:.3f} |
-| out-of-domain (planned weeks between and beside the training conditions) | {int(dsel['out-of-domain'].n_train)} trips: the paper's design (-5/20/32 degC) | {ood['mean']:.4f} +- {ood['se']:.4f} | {ood['min']:.4f} - {ood['max']:.4f} | {yes[ood['on_target']]} | {ood['cost_vs_risk_neutral']:.3f} |
+| out-of-domain (planned weeks between and beside the training conditions) | {int(dsel['out-of-domain'].n_train)} trips: the paper's design (-5/20/32 °C) | {ood['mean']:.4f} +- {ood['se']:.4f} | {ood['min']:.4f} - {ood['max']:.4f} | {yes[ood['on_target']]} | {ood['cost_vs_risk_neutral']:.3f} |
 
 Stays at or below the target (mean <= target + 2 SE): in-domain **{yes[ind['below_target']]}**,
 {NEW_USER} **{yes[nu['below_target']]}**, out-of-domain **{yes[ood['below_target']]}**. Single plans whose truth risk exceeds the target by more

@@ -24,8 +24,8 @@ Set-up (every number in the output comes from this script):
 * Query per trip: ``predict_range`` at the trip's own mean speed, ambient temperature
   and start hour (mode unknown), from SoC 1.0 to reserve 0; implied consumption
   ``100 * budget / range_km_q50``.
-* Comparison per condition cell: the cell of issue 31 (25-35 km/h, 17-23 degC) and the
-  cells of 10 km/h by 6 degC (centred on multiples of 10 km/h and of 6 degC) holding at
+* Comparison per condition cell: the cell of issue 31 (25-35 km/h, 17-23 °C) and the
+  cells of 10 km/h by 6 °C (centred on multiples of 10 km/h and of 6 °C) holding at
   least ``MIN_TRIPS`` trips: the median of the trips' measured consumption against
   the median of their implied consumption. Also all trips together, and the
   median over trips of the per-trip ratio implied / measured.
@@ -83,12 +83,12 @@ def cells(df: pd.DataFrame) -> pd.DataFrame:
     rows = []
     (v_lo, v_hi), (t_lo, t_hi) = ISSUE_CELL
     sel = df.avg_speed_kmh.between(v_lo, v_hi) & df.temperature_c.between(t_lo, t_hi)
-    rows.append(("issue 31 cell: 25-35 km/h, 17-23 degC", df[sel]))
+    rows.append(("issue 31 cell: 25-35 km/h, 17-23 °C", df[sel]))
     v_c = (df.avg_speed_kmh / 10.0).round() * 10.0
     t_c = (df.temperature_c / 6.0).round() * 6.0
     for (v, t), g in df.groupby([v_c, t_c]):
         if len(g) >= MIN_TRIPS:
-            rows.append((f"{v - 5:g}-{v + 5:g} km/h, {t - 3:g}-{t + 3:g} degC", g))
+            rows.append((f"{v - 5:g}-{v + 5:g} km/h, {t - 3:g}-{t + 3:g} °C", g))
     rows.append(("all trips", df))
     out = []
     for name, g in rows:
@@ -165,7 +165,7 @@ speed, temperature and hour, as a drive of legs (`hybridev.apps.drive`: legs of
 Target (issue 31): the range median's implied consumption within +-{100 * TARGET:.0f} % of the
 measured median under the same conditions.
 
-**Issue 31's cell (25-35 km/h, 17-23 degC, {int(head.n)} trips): measured median
+**Issue 31's cell (25-35 km/h, 17-23 °C, {int(head.n)} trips): measured median
 {head.measured_median:.2f} kWh/100 km; out of fold the range median implies
 {head.implied_median:.2f} kWh/100 km, ratio {head.ratio:.3f}
 ({"within" if head.within_target else "outside"} the target); fitted on all trips

@@ -139,7 +139,7 @@ def split(n_trips: int, n_test: int, seed: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def baseline_trips() -> pd.DataFrame:
-    """The paper's baseline scenario (100 km, 90 km/h, 80 %, 20 degC), one trip per mode.
+    """The paper's baseline scenario (100 km, 90 km/h, 80 %, 20 °C), one trip per mode.
 
     ``trip_id`` 0, 1, 2 as in ``evaluation/physics_reproduction/physics_reproduction.py`` (same traces at
     seed 0); ``hour`` 12 (the paper gives none).
@@ -150,7 +150,7 @@ def baseline_trips() -> pd.DataFrame:
 
 
 def soc_grid_trips() -> pd.DataFrame:
-    """Normal driving at 90 km/h from 80 %, 20 degC, noon, 2-120 km (one trace key)."""
+    """Normal driving at 90 km/h from 80 %, 20 °C, noon, 2-120 km (one trace key)."""
     d = np.arange(2.0, 122.0, 2.0)
     return pd.DataFrame({"trip_id": 50_000, "distance_km": d, "avg_speed_kmh": 90.0,
                          "mode": "normal", "temperature_c": 20.0, "soc_initial": 0.8,
@@ -309,7 +309,7 @@ def observed_soc_trips(truth: str, n_trips: int = 150, seed: int = 0) -> pd.Data
     """Trips for the SoC-depletion figure, measured like :func:`hybridev.make_dataset`.
 
     Normal driving at 90 km/h (not one of the paper's design speeds, so
-    ``make_dataset`` cannot produce them), 20 degC, 80 % initial SoC, distance
+    ``make_dataset`` cannot produce them), 20 °C, 80 % initial SoC, distance
     uniform over 5-120 km, departure hour uniform over 0-23, trace seed
     ``seed``. ``E* = E_p (1 + S) max(1 + eta, MIN_NOISE_FACTOR)`` with the
     truth's ``S`` (:func:`hybridev.effect_breakdown`; 0 for the paper's) and

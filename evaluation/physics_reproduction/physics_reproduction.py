@@ -324,7 +324,7 @@ PKE_GRID = (0.0, 0.05, 0.10, 0.13, 0.16, 0.20, 0.25, 0.35)
 
 
 def sensitivity():
-    """kWh/km at 100 km / 90 km/h / 20 degC vs the PKE target, each mode (mean of seeds)."""
+    """kWh/km at 100 km / 90 km/h / 20 °C vs the PKE target, each mode (mean of seeds)."""
     rates = np.empty((len(PKE_GRID), len(MODES)))
     for j, m in enumerate(MODES):
         for i, x in enumerate(PKE_GRID):

@@ -26,9 +26,9 @@ Set-up
 * **Fresh conditions, two sets.** *Inside the training conditions*: 1,500
   condition rows drawn like the paper's design (:func:`hybridev.make_trips` with
   seed 101: speed in {40, ..., 120} km/h, three modes, temperature in {-5, 20,
-  32} degC, hour 0-23, SoC 0.3-1.0) with new trip keys, and a reserve of 0.1.
+  32} °C, hour 0-23, SoC 0.3-1.0) with new trip keys, and a reserve of 0.1.
   *Between the training conditions*: 1,500 more rows (seed 102) whose speed is
-  drawn from {50, 70, 90, 110} km/h and temperature from {7.5, 26} degC, values
+  drawn from {50, 70, 90, 110} km/h and temperature from {7.5, 26} °C, values
   no training trip has (between its speeds and between its temperatures).
   ``--quick`` uses 300 rows per set.
 * **The truth's long drive.** A range is driven as consecutive truth trips of
@@ -40,7 +40,7 @@ Set-up
   (1,000 steps, at least 8 per cycle; :func:`hybridev.apps.drive.additive_leg_km`:
   62 km at 40 km/h in "normal" mode, 42 km in "aggressive"): its cycles are
   stretched, and its consumption per km falls with its length (at 40 km/h,
-  20 degC, "normal", mean of 40 traces: 15.8 kWh/100 km at 20-80 km, 14.6 at
+  20 °C, "normal", mean of 40 traces: 15.8 kWh/100 km at 20-80 km, 14.6 at
   112 km, 13.4 at 200 km). A drive cut into such legs would have a range that
   depends on where it is cut, which no car has: the truth is additive over
   distance only up to that length. So the legs are drawn uniform from 20 km to
@@ -238,7 +238,7 @@ def fig_fan(model, cap) -> tuple[Figure, dict]:
                 zorder=3, label=f"truth, {N_EXAMPLE_DRAWS} days" if i == 0 else None)
     plot_soc_fan(fan, soc_reserve=RESERVE, ranges=band, ax=ax,
                  title=f"SoC fan: {EXAMPLE['avg_speed_kmh']:g} km/h, {EXAMPLE['mode']}, "
-                       f"{EXAMPLE['temperature_c']:g} degC, {EXAMPLE['hour']:g} h, "
+                       f"{EXAMPLE['temperature_c']:g} °C, {EXAMPLE['hour']:g} h, "
                        f"from SoC {EXAMPLE_SOC}")
     return fig, band.to_dict()
 
@@ -342,7 +342,7 @@ def main(argv=None) -> int:
         f"vehicle=TRUTH_VEHICLE)` ({fit_s:.1f} s); {n_cond} fresh conditions inside the "
         f"training conditions (the paper's design, SoC 0.3-1.0, reserve {RESERVE}) and "
         f"{n_cond} between them (speeds {', '.join(f'{v:g}' for v in BETWEEN_SPEEDS_KMH)} "
-        f"km/h, temperatures {', '.join(f'{t:g}' for t in BETWEEN_TEMPS_C)} degC); one noise "
+        f"km/h, temperatures {', '.join(f'{t:g}' for t in BETWEEN_TEMPS_C)} °C); one noise "
         "draw per drive; true range by direct simulation of the truth. The range is a drive "
         "of legs at the middle of the familiar lengths (from the shortest training trip to the "
         "median one, or to the length that keeps the trace's drive cycles; "
@@ -369,9 +369,9 @@ def main(argv=None) -> int:
         + "; ".join(f"{name} {pct(g.err50.median())} (median absolute "
                     f"{pct(g.err50.abs().median())})" for name, g in df.groupby("set")) + ".",
         "",
-        "### By temperature (degC)",
+        "### By temperature (°C)",
         "",
-        md_table(by_t, "set / degC"),
+        md_table(by_t, "set / °C"),
         "",
         "### By mean speed",
         "",
@@ -387,7 +387,7 @@ def main(argv=None) -> int:
         "",
         "### By speed and temperature",
         "",
-        md_table(by_cell, "set / km/h / degC"),
+        md_table(by_cell, "set / km/h / °C"),
         "",
         "## Calibration of all quantiles",
         "",
@@ -407,7 +407,7 @@ def main(argv=None) -> int:
         f"![fan chart]({f1})",
         "",
         f"Fan chart for {EXAMPLE['avg_speed_kmh']:g} km/h, {EXAMPLE['mode']}, "
-        f"{EXAMPLE['temperature_c']:g} degC, departing {EXAMPLE['hour']:g} h at SoC "
+        f"{EXAMPLE['temperature_c']:g} °C, departing {EXAMPLE['hour']:g} h at SoC "
         f"{EXAMPLE_SOC}: predicted median SoC with 50 % and 90 % bands; grey: "
         f"{N_EXAMPLE_DRAWS} draws of the truth (same route, new noise). Range to SoC "
         f"{RESERVE}: q10 {band['range_km_q10']:.0f} km, q50 {band['range_km_q50']:.0f} km, "
@@ -419,7 +419,7 @@ def main(argv=None) -> int:
     with atomic_path(OUT_MD) as tmp:
         tmp.write_text("\n".join(lines), encoding="utf-8")
     print(md_table(sets, "conditions"))
-    print(md_table(by_t, "set / degC"))
+    print(md_table(by_t, "set / °C"))
     print(md_table(by_v, "set / speed"))
     print(f"wrote {OUT_MD}")
     return 0

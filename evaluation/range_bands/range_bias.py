@@ -98,7 +98,7 @@ def md(g: pd.DataFrame) -> str:
             ("correction_used", "correction used"), ("planned", "planned-trip correction"),
             ("interpolated_vs_truth", "with the network's correction, vs truth"),
             ("prediction_vs_truth", "prediction vs truth")]
-    lines = ["| km/h | degC | truth kWh/100 km | " + " | ".join(c[1] for c in cols) + " |",
+    lines = ["| km/h | °C | truth kWh/100 km | " + " | ".join(c[1] for c in cols) + " |",
              "|---|---|---|" + "---|" * len(cols)]
     for (v, t), r in g.iterrows():
         vals = " | ".join(f"{r[c]:.2f}" if c == "support" else f"{100 * r[c]:+.1f} %"
@@ -124,7 +124,7 @@ def main() -> int:
         "hand. Set-up in the script's docstring: the model and truth of `range_bands.py`, "
         f"{3 * N_PER_MODE} trips of the range's leg length per cell "
         f"({t.distance_km.min():.1f}-{t.distance_km.max():.1f} km). Training values: "
-        "-5, 20 and 32 degC; 40, 60, ..., 120 km/h. Corrections in % of the physics (with "
+        "-5, 20 and 32 °C; 40, 60, ..., 120 km/h. Corrections in % of the physics (with "
         "the discrepancy), errors in % of the truth (positive: the model predicts more "
         "energy, a shorter range).",
         "",

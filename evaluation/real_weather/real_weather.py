@@ -98,7 +98,7 @@ def _fit_no_prior(stats, y: np.ndarray, idx: np.ndarray) -> dict[str, float]:
 def winter_what_if(m: MeasuredTrips, vehicle: VehicleParams, post_all) -> dict:
     """M1's own trips and traces replayed at ``WINTER_C``: what each calibration predicts.
 
-    The car was logged at 5-30 degC only, so nothing here is measured: it shows how
+    The car was logged at 5-30 °C only, so nothing here is measured: it shows how
     the calibration extrapolates. Against the same trips at their logged temperatures:
     energy ratio of the nominal physics, of the default calibration (heating scale and
     heating onset) and of the calibration without the onset (heating scale alone, the

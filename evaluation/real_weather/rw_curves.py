@@ -30,27 +30,27 @@ Geotab: 4,200 vehicles, 102 models)."""
 F_TO_C = {20: -6.7, 72: 22.2, 75: 23.9, 95: 35.0}
 
 PUBLISHED = [
-    # (source, cycle, T (degC), T_ref (degC), consumption ratio vs T_ref, how derived)
+    # (source, cycle, T (°C), T_ref (°C), consumption ratio vs T_ref, how derived)
     ("AAA 2019 (5 BEVs, dynamometer, HVAC on)", "combined", F_TO_C[20], F_TO_C[75],
-     1 / (1 - 0.41), "range -41 % at 20 degF vs 75 degF"),
+     1 / (1 - 0.41), "range -41 % at 20 °F vs 75 °F"),
     ("AAA 2019 (5 BEVs, dynamometer, HVAC on)", "combined", F_TO_C[95], F_TO_C[75],
-     1 / (1 - 0.17), "range -17 % at 95 degF vs 75 degF"),
+     1 / (1 - 0.17), "range -17 % at 95 °F vs 75 °F"),
     ("AAA 2019 (HVAC off)", "combined_no_hvac", F_TO_C[20], F_TO_C[75],
-     1 / (1 - 0.12), "range -12 % at 20 degF, HVAC off"),
+     1 / (1 - 0.12), "range -12 % at 20 °F, HVAC off"),
     ("AAA 2019 (HVAC off)", "combined_no_hvac", F_TO_C[95], F_TO_C[75],
-     1 / (1 - 0.04), "range -4 % at 95 degF, HVAC off"),
+     1 / (1 - 0.04), "range -4 % at 95 °F, HVAC off"),
     ("ANL APRF, Nissan Leaf (Lohse-Busch et al. 2013)", "city", F_TO_C[20], F_TO_C[72],
-     2.0, "'nearly double' on UDDS at 20 degF, heater on"),
+     2.0, "'nearly double' on UDDS at 20 °F, heater on"),
     ("ANL APRF, Nissan Leaf (Lohse-Busch et al. 2013)", "highway", F_TO_C[20], F_TO_C[72],
-     1.4, "+40 % on HWFET at 20 degF, heater on"),
+     1.4, "+40 % on HWFET at 20 °F, heater on"),
     ("Geotab 2020 (4,200 EVs, 5.2 M trips)", "combined", -15.0, 21.5, 1.15 / 0.54,
-     "54 % of rated range at -15 degC vs 115 % at 21.5 degC"),
+     "54 % of rated range at -15 °C vs 115 % at 21.5 °C"),
     ("Geotab 2020 (4,200 EVs, 5.2 M trips)", "combined", 10.0, 21.5, 1.15 / 1.00,
-     ">= 100 % of rated range from 10 degC, 115 % at 21.5 degC"),
+     ">= 100 % of rated range from 10 °C, 115 % at 21.5 °C"),
     ("ADAC / Green NCAP 2024 (cold-soaked BEVs, WLTC)", "wltc", -7.0, 23.0, 1.70,
-     "+70 % energy on average at -7 vs 23 degC (cars: +38 % to +100 %)"),
+     "+70 % energy on average at -7 vs 23 °C (cars: +38 % to +100 %)"),
     ("Xu et al. 2026 (3 BEVs, dynamometer, WLTC)", "wltc", -25.0, 23.0,
-     0.5 * (1.8865 + 2.4345), "+88.65 % to +143.45 % at -25 vs 23 degC; mid-point"),
+     0.5 * (1.8865 + 2.4345), "+88.65 % to +143.45 % at -25 vs 23 °C; mid-point"),
 ]
 """Published measured points (see real_weather.md for the references)."""
 
@@ -206,8 +206,8 @@ def curve_table(vehicle: VehicleParams = COMPACT, combined: np.ndarray | None = 
 
 BATTERY_HEAT_WHATIF = {"battery_warmup_kwh_per_k": 0.1, "battery_heat_below_c": 0.0}
 """What-if (not a default): the pack is heated at the start of a trip from ambient up to
-0 degC. 0.1 kWh/K is the heat capacity of a ~350 kg compact-BEV pack at ~1 kJ/(kg K)
-(Li-ion cells: 0.8-1.1 J/(g K)); the 0 degC threshold is an assumption (manufacturers
+0 °C. 0.1 kWh/K is the heat capacity of a ~350 kg compact-BEV pack at ~1 kJ/(kg K)
+(Li-ion cells: 0.8-1.1 J/(g K)); the 0 °C threshold is an assumption (manufacturers
 do not publish it)."""
 
 
@@ -217,16 +217,16 @@ def _ratio(v_mps, t, t_ref, vehicle) -> float:
 
 
 def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
-    """The Geotab point at -15 degC: what the comparison and candidate physics change.
+    """The Geotab point at -15 °C: what the comparison and candidate physics change.
 
     Returns the combined cycle's share of distance in the city now and before the
     2026-11-26 revision (:func:`combined_before_revision`) with the combined points'
-    rows under the old cycle; the model ratio (-15 vs 21.5 degC, and 10 vs 21.5 degC) for trips of 10 to
+    rows under the old cycle; the model ratio (-15 vs 21.5 °C, and 10 vs 21.5 °C) for trips of 10 to
     52 minutes at the combined cycle's city/highway mix and for a city-only trip; the
     number of published points matched with the battery-heating what-if
-    (:data:`BATTERY_HEAT_WHATIF`) and its Geotab -15 ratio; and the ratio at -15 degC
+    (:data:`BATTERY_HEAT_WHATIF`) and its Geotab -15 ratio; and the ratio at -15 °C
     interpolated (log-linear in temperature) between the two WLTC dynamometer points
-    (-7 and -25 degC), with the model's WLTC ratio at -15 degC.
+    (-7 and -25 °C), with the model's WLTC ratio at -15 °C.
     """
     by_len = {m: (_ratio(mixed(m), -15.0, 21.5, vehicle), _ratio(mixed(m), 10.0, 21.5, vehicle))
               for m in (10, 20, 30, 52)}
@@ -251,7 +251,7 @@ def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
             "battery_heating": {"n_matched": sum(r["matched"] for r in rows), "n": len(rows),
                                 "geotab_minus15": geo["model_ratio"],
                                 "failed": [f"{r['source'].split(' (')[0]} {r['cycle']} "
-                                           f"{r['temperature_c']:g} degC "
+                                           f"{r['temperature_c']:g} °C "
                                            f"({r['rel_error'] * 100:+.0f} %)"
                                            for r in rows if not r["matched"]]},
             "dyno_interpolated_minus15": interp,
@@ -259,7 +259,7 @@ def diagnosis_minus15(vehicle: VehicleParams = COMPACT) -> dict:
 
 
 def curves(vehicle: VehicleParams = COMPACT, temps=None) -> dict[str, np.ndarray]:
-    """Consumption ratio to 21.5 degC over a temperature grid, per cycle."""
+    """Consumption ratio to 21.5 °C over a temperature grid, per cycle."""
     temps = np.linspace(-25.0, 40.0, 66) if temps is None else np.asarray(temps, float)
     out = {"temperature_c": temps}
     for kind in ("city", "highway", "combined", "wltc"):

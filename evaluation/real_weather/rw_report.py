@@ -122,7 +122,7 @@ def _moved(dg: dict, now: dict, closer: bool) -> str:
 
 
 def _diag_len(d: dict, i: int) -> str:
-    """Ratios at -15 degC (i=0) or 10 degC (i=1) for the trip lengths of the diagnosis."""
+    """Ratios at -15 °C (i=0) or 10 °C (i=1) for the trip lengths of the diagnosis."""
     return ", ".join(f"{v[i]:.2f}" for v in d["by_length"].values())
 
 

@@ -9,9 +9,9 @@ hybridev's physics cannot fit it by construction:
   spacing, speed fluctuations around the cruise speed (an Ornstein-Uhlenbeck process),
   and accelerations bounded by a speed-dependent limit. Kinematically consistent:
   distance is the integral of speed, ``a = dv/dt``.
-* **Road load**: ``F = A + B v + C v^2`` at 20 degC on a dry road, but the truth also
+* **Road load**: ``F = A + B v + C v^2`` at 20 °C on a dry road, but the truth also
   has air density ``rho(T)``, a head or tail wind per trip, rolling resistance that
-  rises in the cold (+0.5 %/K below 20 degC), winter tyres from December to February
+  rises in the cold (+0.5 %/K below 20 °C), winter tyres from December to February
   (+12 % rolling), and a wet road on some days (+15 % rolling).
 * **Drive unit**: a motor-inverter loss map ``P_loss = k0 w + k1 tau^2 + k2 w^2 + P0``
   (torque ``tau``, motor speed ``w``): efficiency depends on the operating point, not
@@ -50,7 +50,7 @@ import pandas as pd
 __all__ = ["CARS", "TruthCar", "simulate_car"]
 
 G = 9.81
-RHO_20C = 1.204  # kg/m^3 at 20 degC, 1 atm
+RHO_20C = 1.204  # kg/m^3 at 20 °C, 1 atm
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ class TruthCar:
 
     name: str
     mass_kg: float
-    a_n: float  # coast-down A, N (20 degC, dry road)
+    a_n: float  # coast-down A, N (20 °C, dry road)
     b_n_per_kmh: float
     c_n_per_kmh2: float
     wheel_radius_m: float
@@ -158,7 +158,7 @@ def _elevation(rng: np.random.Generator, s_m: np.ndarray) -> np.ndarray:
 
 
 def _hp_cop(t_amb: float) -> float:
-    """Heat-pump COP against ambient temperature (air-source, cabin at ~22 degC)."""
+    """Heat-pump COP against ambient temperature (air-source, cabin at ~22 °C)."""
     return float(np.clip(2.9 + 0.055 * t_amb, 1.2, 4.0))
 
 
@@ -176,7 +176,7 @@ def _energy(car: TruthCar, v: np.ndarray, z: np.ndarray, t_amb: np.ndarray, *,
     ta = 0.5 * (t_amb[1:] + t_amb[:-1])
     rho = RHO_20C * 293.15 / (ta + 273.15)
     vk = vm * 3.6
-    # Road load: coast-down at 20 degC, dry; air density, wind, cold tyres, season.
+    # Road load: coast-down at 20 °C, dry; air density, wind, cold tyres, season.
     c_air = car.c_n_per_kmh2 * rho / RHO_20C
     v_air_k = (vm + wind_mps) * 3.6
     roll = car.a_n * roll_factor * (1.0 + 0.005 * np.maximum(20.0 - ta, 0.0))
@@ -275,7 +275,7 @@ def simulate_car(car: TruthCar, *, n_days_per_season: int = 30, seed: int = 0
     ``distance_km``, ``avg_speed_kmh``, ``duration_s``, ``hour``, ``start_time``
     (local, to the second). Time series:
     ``trip_id``, ``t_s``, ``speed_kmh``, ``elevation_m`` (GPS, rounded to 1 m),
-    ``amb_temp_c`` (the car's sensor, 0.5 degC steps).
+    ``amb_temp_c`` (the car's sensor, 0.5 °C steps).
 
     The driver's set point and A/C threshold are the same driver all year.
     """

@@ -5,7 +5,7 @@ Run from the repository root::
     python evaluation/seasonal_car/seasonal_car.py [--out DIR] [--quick]
 
 The project is judged on real cars that are not in this repository, logged in summer
-and in winter. M1 (``evaluation/real_weather``) has no trip below 5 degC, so this
+and in winter. M1 (``evaluation/real_weather``) has no trip below 5 °C, so this
 script checks the winter path on two synthetic cars whose truth
 (``sc_truth.py``) shares nothing with hybridev's physics: its own drive cycles, a
 motor loss map, a cabin thermal model with a heat pump or a PTC heater, a pack heater,
@@ -230,7 +230,7 @@ def write(out_dir: Path, result: dict) -> None:
         car = r["car"]
         lines += [f"## {car['name']}", "",
                   f"{r['n_trips']} trips on {r['n_days']} days (half summer, half winter; "
-                  f"trip-mean sensor temperature {r['t_min']:.0f} to {r['t_max']:.0f} degC); "
+                  f"trip-mean sensor temperature {r['t_min']:.0f} to {r['t_max']:.0f} °C); "
                   f"measured consumption, median kWh/100 km: summer "
                   f"{r['kwh100_summer']:.1f}, winter {r['kwh100_winter']:.1f}.", "",
                   "### Both seasons, 3-fold CV grouped by date", "",

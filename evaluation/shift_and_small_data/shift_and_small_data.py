@@ -31,7 +31,7 @@ Studies (all with ``HybridModel`` defaults unless a conformal mode is named):
    (``--seeds``; the modes other than the default on the first
    :data:`OTHER_MODE_SEEDS` of them only).
 2. **Warm-trained, cold-tested** on the synthetic truth, both set-ups: trained
-   on the 20 and 32 degC trips only, tested on all temperatures (-5 degC is new). Coverage of
+   on the 20 and 32 °C trips only, tested on all temperatures (-5 °C is new). Coverage of
    flagged and unflagged rows, share of out-of-temperature rows flagged, and the
    confidence signal's Spearman correlation with the absolute relative error
    against size-only baselines (distance, predicted energy).
@@ -40,7 +40,7 @@ Studies (all with ``HybridModel`` defaults unless a conformal mode is named):
    training on 10, 20, 40 trips (days drawn at random from the training days,
    at most half the trips from one day) and on all training days; the car as a new user sets it up,
    ``VehicleParams.from_coastdown(179.4, 0.28, 0.0235, mass_kg=1919)`` and
-   ``fit(..., groups=date)``. Then warm-trained (trips at >= 20 degC of the
+   ``fit(..., groups=date)``. Then warm-trained (trips at >= 20 °C of the
    training days), tested on every trip of the held-out days.
 
 Widths: ``rel_width`` is the mean of ``(hi - lo) / E`` over trips (E the measured
@@ -197,7 +197,7 @@ def _size_rows(setup, vehicle, size, rep, x, y, only_default=False) -> list[dict
 
 def synthetic_shift(vehicle=None) -> dict:
     pool = truth(600, 7)
-    train = pool[pool.temperature_c > 0].head(200)  # 20 and 32 degC only
+    train = pool[pool.temperature_c > 0].head(200)  # 20 and 32 °C only
     test = truth(1000, 998)
     y = test["energy_kwh"].to_numpy(float)
     _, out = fit_predict(train, test.drop(columns=["energy_kwh", "soc_final"]),
@@ -337,7 +337,7 @@ def temperature_table(rows: list[dict]) -> str:
                        for t, v in r["by_temperature"].items()])
     if df.empty:
         return "(no rows)"
-    lines = ["| set-up | n_train | test temperature, degC | draws | in-domain coverage | bias % "
+    lines = ["| set-up | n_train | test temperature, °C | draws | in-domain coverage | bias % "
              "(pred / measured - 1) | MAPE % |", "|---|---|---|---|---|---|---|"]
     for (setup, n, temp), g in df.groupby(["setup", "n_train", "temperature"], sort=False):
         lines.append(f"| {setup} | {n} | {temp:g} | {len(g)} | {g['coverage'].mean():.3f} | "
@@ -400,14 +400,14 @@ def write(doc: dict, out_dir: Path) -> None:
           bin_table(doc["synthetic_sizes"]),
           "\n## 2. Warm-trained, cold-tested, synthetic truth\n"]
     for setup, sh in doc["synthetic_shift"].items():
-        md += [f"**{setup}**: trained on {sh['n_train']} trips at 20 and 32 degC.\n",
+        md += [f"**{setup}**: trained on {sh['n_train']} trips at 20 and 32 °C.\n",
                shift_block(sh), ""]
     if doc.get("m1"):
         m1 = doc["m1"]
         md += ["\n## 3. M1, 5-fold cross-validation grouped by date\n",
                "Mean over folds (min-max of the fold values).\n",
                size_table(m1["sizes"], ("size", "mode")),
-               "\n### Warm-trained (>= 20 degC), tested on the held-out days\n"]
+               "\n### Warm-trained (>= 20 °C), tested on the held-out days\n"]
         for s in m1["shift"]:
             md += [f"**Fold {s['fold']}** ({s['n_train']} training trips)\n", shift_block(s), ""]
         if "confidence_all_sizes_pooled" in m1:

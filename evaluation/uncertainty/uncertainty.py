@@ -16,7 +16,7 @@ Experiments (details in the modules' docstrings):
    :mod:`hybridev.physics.truth`; paper protocol (1,500 trips: 1,275 fit, 225 test) over
    several seeds, plus a large fresh test set per seed with new trip keys
    (``uq_data``).
-2. ``uq_experiments.run_shift``: train at 20/32 degC, test at -5 degC; train
+2. ``uq_experiments.run_shift``: train at 20/32 °C, test at -5 °C; train
    at 40-100 km/h, test at 120 km/h.
 3. ``uq_recovery``: coverage of the physics posterior's 90 % credible
    intervals for parameters drawn from the prior.

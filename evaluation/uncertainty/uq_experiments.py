@@ -17,7 +17,7 @@ Part of ``evaluation/uncertainty/uncertainty.py``. Per seed ``s`` (all models wi
   ``heteroscedastic=False``, ``calibrate_physics=False``) on the same 1,084
   trips, constant-width split conformal on ``|y - yhat|`` of the same
   calibration trips;
-* shift: ``HybridModel()`` defaults fitted on the fit trips at 20/32 degC
+* shift: ``HybridModel()`` defaults fitted on the fit trips at 20/32 °C
   (resp. 40-100 km/h), tested on the fresh trips in and out of that range.
 """
 
@@ -39,7 +39,7 @@ __all__ = ["SHIFTS", "run_seed"]
 CONFORMAL_FRACTION = 0.15
 POINT = dict(n_members=1, heteroscedastic=False, calibrate_physics=False, conformal_fraction=0.0)
 SHIFTS = {
-    "temperature": ("temperature_c", "20/32 degC", "-5 degC",
+    "temperature": ("temperature_c", "20/32 °C", "-5 °C",
                     lambda t: t["temperature_c"] > 0, lambda t: t["temperature_c"] < 0),
     "speed": ("avg_speed_kmh", "40-100 km/h", "120 km/h",
               lambda t: t["avg_speed_kmh"] <= 100, lambda t: t["avg_speed_kmh"] > 110),

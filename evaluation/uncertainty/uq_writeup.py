@@ -442,7 +442,7 @@ def writeup(res: dict, tables: dict, figs: dict, meta: dict) -> str:
         "floor and the out-of-domain spread of the library and asserted equal to "
         "`predict_interval` at 50/80/90/95 % on every split test set.",
         f"* Shift ({cfg['shift_seeds']} seeds): `HybridModel()` fitted on the fit trips at "
-        "20/32 degC (resp. 40-100 km/h) only, tested on fresh trips in range and at -5 degC "
+        "20/32 °C (resp. 40-100 km/h) only, tested on fresh trips in range and at -5 °C "
         f"(resp. 120 km/h). Recovery: {res['recovery_info']['n_seeds']} seeds x 300 "
         "simulated trips with parameters drawn from the prior (`evaluation/uncertainty/uq_recovery.py`).",
         f"* Warnings while fitting: {warn_txt}; ConvergenceWarnings in the recovery study: "

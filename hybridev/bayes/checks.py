@@ -123,7 +123,7 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
     A fitted model is still returned; the warning names each parameter whose
     posterior median lies outside its prior's central ``level`` range
     (:func:`prior_check`), and the likely causes: an input in the wrong unit
-    (temperatures in degF, energies in Wh, distances in miles), a wrong vehicle
+    (temperatures in °F, energies in Wh, distances in miles), a wrong vehicle
     (coast-down, mass), or something the physics does not model, with the
     physical reading of that parameter and side from :data:`UNPHYSICAL_HINTS`
     where there is one.
@@ -163,7 +163,7 @@ def warn_unphysical(post, level: float = 0.99, *, stacklevel: int = 3) -> list[s
         warnings.warn(
             f"physics posterior: {items}: outside what the prior calls plausible, so the "
             "calibrated physics is compensating for something. Check the units of the "
-            "inputs (temperature_c in degC, energy_kwh in kWh, distance_km in km, "
+            "inputs (temperature_c in °C, energy_kwh in kWh, distance_km in km, "
             "avg_speed_kmh in km/h) and the vehicle (coast-down A/B/C, mass); if they are "
             "right, the car or its driver differs from the model there (posterior_"
             ".prior_check() has the table)" + "".join(f". Possible reading, {h}" for h in hints),

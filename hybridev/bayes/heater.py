@@ -21,7 +21,7 @@ prior, :class:`~hybridev.bayes.priors.PhysicsPrior`'s split normal):
 
 A PTC car whose driver heats only in the cold has the same mild-weather dip as
 a heat pump: without the onset the PTC fit could not show it, and such a car
-was taken for a heat pump (300 trips at -15 to 35 degC with an onset 8 K late,
+was taken for a heat pump (300 trips at -15 to 35 °C with an onset 8 K late,
 ``tests/bayes/test_heater.py``). Maximising over the onset instead (profiling)
 swung the other way: the heat-pump car of ``evaluation/seasonal_car`` was fitted
 about as well by a PTC heater with an onset at the edge of its prior, and the
@@ -39,7 +39,7 @@ runs from the number of groups (``rho = 1``) to the number of trips
 chosen when ``ln B >= HEATER_EVIDENCE`` (strong evidence on the Kass & Raftery
 1995 scale, ``2 ln B >= 6``); otherwise the car keeps the PTC heater, the
 conservative default (it draws more in the cold, so ranges err short). Trips
-with little heating (a summer-only log, or M1's 5-30 degC) give ``ln B`` near
+with little heating (a summer-only log, or M1's 5-30 °C) give ``ln B`` near
 0 and keep PTC.
 
 Called by :func:`hybridev.bayes.sampler.calibrate_physics` and

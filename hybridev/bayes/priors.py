@@ -77,11 +77,11 @@ class PhysicsPrior:
         much between cars and drivers (AAA 2019: HVAC on/off changes cold
         range by 29 points). The published car-to-car spread lies well
         inside it: ADAC/Green NCAP 2024 measured +38 % to +100 % energy at
-        -7 degC on the WLTC (battery heating included), i.e. heating shares
+        -7 °C on the WLTC (battery heating included), i.e. heating shares
         from ~0.5 of the PTC default up to the heater's rating, and a heat
-        pump (COP 2-3 at 0-15 degC) draws a share of 0.33-0.5. It is not
+        pump (COP 2-3 at 0-15 °C) draws a share of 0.33-0.5. It is not
         widened: the one published fleet curve that stays nearly flat in
-        mild cold (Tesla Model S down to -4 degC, FleetCarma 2016) is
+        mild cold (Tesla Model S down to -4 °C, FleetCarma 2016) is
         explained by battery and cabin conditioning between trips, energy
         that a trip's measurement does not contain. A driver who does not
         heat in mild weather is the heating *onset*'s to explain
@@ -92,7 +92,7 @@ class PhysicsPrior:
         ``log warmup_scale ~ N(0, sd)``; the scale multiplies the warm-up energy.
     heating_offset_sd_k : tuple of 2 float, K
         ``heating_offset_k`` (how far below the physical balance point, 17.4
-        degC by default, a driver starts heating) has a split-normal prior
+        °C by default, a driver starts heating) has a split-normal prior
         centred on the nominal value: sd ``(below, above)`` = (2, 5) K,
         truncated to ``heating_offset_bounds_k``; 99 % of it lies in about
         [-4.8, +13.5] K. Later onsets (positive) are the wide side: clothing
@@ -102,14 +102,14 @@ class PhysicsPrior:
         ``UA``). Earlier onsets (negative) need a warmer set point (+-1.5 K
         between drivers) or fewer gains than the default's (no sun at night:
         ~2 K), so that side is narrow: a wide one let a car trained on warm
-        trips only (20-28 degC) explain a little unmodelled energy there as
-        heating from 24 degC and then over-predict its cool trips with narrow
+        trips only (20-28 °C) explain a little unmodelled energy there as
+        heating from 24 °C and then over-predict its cool trips with narrow
         intervals (``evaluation/shift_and_small_data``, M1 warm-trained
         folds). The onset separates *when* a car heats, which mild-weather
         trips pin down, from *how much* a cold cabin needs
-        (``heating_scale``): a car logged at 5-15 degC that barely heats then
+        (``heating_scale``): a car logged at 5-15 °C that barely heats then
         keeps a physical heating slope for winter instead of a tiny scale
-        that would also apply at -15 degC.
+        that would also apply at -15 °C.
     heating_offset_bounds_k : tuple of 2 float, K
         Support of ``heating_offset_k`` relative to the nominal value.
     coastdown_log_sd : float

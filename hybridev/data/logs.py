@@ -34,7 +34,7 @@ __all__ = ["TEMPERATURE_TOLERANCE_K", "TRACE_TOLERANCE", "MeasuredTrips", "harmo
 TEMPERATURE_TOLERANCE_K = 10.0
 """A trip's ``temperature_c`` this far (K) from its trace's mean ``amb_temp_c`` warns
 (:func:`match_traces`): a car's sensor and a weather record differ by a few K, degrees
-Fahrenheit read as Celsius by 10 K or more above -27 degC."""
+Fahrenheit read as Celsius by 10 K or more above -27 °C."""
 
 TRACE_TOLERANCE = 0.10
 """Largest relative difference allowed between a trip row and its logged trace:
@@ -131,7 +131,7 @@ def _check_temperatures(trips: pd.DataFrame, traces: LoggedTraces, tid: pd.Serie
         warnings.warn(
             f"{int(off.sum())} of {len(x)} {what} have a temperature_c more than "
             f"{TEMPERATURE_TOLERANCE_K:g} K from their trace's mean amb_temp_c (first: "
-            f"trip_id={tid.iloc[i]!r}, temperature_c={x[i]:g} against {ref[i]:.1f} degC); "
+            f"trip_id={tid.iloc[i]!r}, temperature_c={x[i]:g} against {ref[i]:.1f} °C); "
             "degrees Fahrenheit instead of Celsius? The physics uses the trace's "
             "temperatures, the network and the domain check the table's", DataWarning,
             stacklevel=4)

@@ -11,7 +11,7 @@ column             unit    meaning
 ``elevation_m``    m       optional: altitude (GPS altitude is fine)
 ``grade_pct``      %       optional: road grade, [-30, 30]; used instead of
                            ``elevation_m`` when both are present
-``amb_temp_c``     degC    optional: ambient temperature, [-50, 60]
+``amb_temp_c``     °C    optional: ambient temperature, [-50, 60]
 ``soc``            --      optional: state of charge, [0, 1]
 =================  ======  ====================================================
 
@@ -83,7 +83,7 @@ def validate_timeseries(timeseries: pd.DataFrame, *, min_samples: int = 10,
     A trip is rejected (with one reason) when any sample has a non-finite or
     non-increasing ``t_s``, a speed outside [0, 250] km/h or non-finite, a
     non-finite elevation, a grade outside [-30, 30] %, a temperature outside
-    [-50, 60] degC, a SoC outside [0, 1]; when it has fewer than
+    [-50, 60] °C, a SoC outside [0, 1]; when it has fewer than
     ``min_samples`` samples; or a gap longer than ``max_gap_s``. Samples
     without a ``trip_id`` are reported as one rejected group.
 

@@ -45,7 +45,7 @@ def linear_design_matrix(trips: pd.DataFrame) -> np.ndarray:
     """Design matrix of :class:`LinearBaseline`, shape (n_trips, 8).
 
     With distance ``d`` (km), mean speed ``v`` (km/h), duration ``t = d / v``
-    (h) and temperature ``T`` (degC): ``d * onehot(mode)`` (a base rate per
+    (h) and temperature ``T`` (°C): ``d * onehot(mode)`` (a base rate per
     mode; uniform 1/3 for an unknown mode), ``d v / 100``, ``d v^2 / 100^2``
     (speed-dependent rate), ``t`` (constant power), ``t max(0, 15 - T) / 10``
     and ``t max(0, T - 25) / 10`` (heating and cooling power). No intercept:

@@ -6,7 +6,7 @@ quantities, every value it was trained on (:class:`TrainingDomain`):
 ========================  ===========================  =====================
 quantity                  from                          tolerance ``tol_f``
 ========================  ===========================  =====================
-``temperature_c``         trip column                   3 degC
+``temperature_c``         trip column                   3 °C
 ``avg_speed_kmh``         trip column                   8 km/h
 ``log_distance``          ``ln(distance_km)``           ``ln 1.5``
 ``log_duration``          ``ln(distance / speed)``      ``ln 1.5``
@@ -18,8 +18,8 @@ A new trip's gap in each quantity is the distance to the *nearest* training
 value over the tolerance; beyond the training range it counts against a third
 of it (:data:`EDGE_FRACTION`: extrapolation is riskier). Between two training
 values of an intensive quantity the gap is 0: the condition is interpolated
-between familiar ones, not new (a trip at 3 degC between the paper design's -5
-and 20 degC); its distance to the nearest value is the *interpolation gap*
+between familiar ones, not new (a trip at 3 °C between the paper design's -5
+and 20 °C); its distance to the nearest value is the *interpolation gap*
 (:meth:`TrainingDomain.interior_gap`), which widens at a learned rate
 (:class:`hybridev.learning.shift.GapRate`). A trip's ``domain_score`` is the
 largest gap over the intensive quantities (:data:`INTENSIVE_QUANTITIES`); it is
@@ -86,7 +86,7 @@ INTENSIVE = np.array([q in INTENSIVE_QUANTITIES for q in DOMAIN_QUANTITIES])
 """Mask over :data:`DOMAIN_QUANTITIES` of the intensive quantities, shape (5,)."""
 
 EDGE_FRACTION = 1.0 / 3.0
-"""Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 degC, ...):
+"""Beyond the training range a gap counts against ``EDGE_FRACTION * tol`` (1 °C, ...):
 extrapolating is riskier than interpolating between training values."""
 
 MISSING_INPUT_SCORE = 2.0
@@ -169,7 +169,7 @@ class TrainingDomain:
     >>> dom = TrainingDomain.fit(t, np.zeros((6, 2)))
     >>> new = t.iloc[:3].assign(temperature_c=[-4.0, 3.0, 45.0])
     >>> score, ok = dom.score(new)
-    >>> score.round(2).tolist(), ok.tolist()  # 3 degC lies between -5 and 20 degC
+    >>> score.round(2).tolist(), ok.tolist()  # 3 °C lies between -5 and 20 °C
     ([0.0, 0.0, 13.0], [True, True, False])
     """
 

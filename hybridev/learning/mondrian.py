@@ -5,8 +5,8 @@ can be under-covered while mild short ones are over-covered. Mondrian conformal
 prediction (Vovk et al. 2005, Sec. 4.5; Bostrom et al., crepes'
 ``ConformalRegressor(bins=...)``) calibrates each bin on its own calibration
 trips, so coverage holds within every bin. ``HybridModel(mondrian=True)`` uses
-six bins, temperature band (:data:`TEMPERATURE_BANDS_C`: cold < 5 degC <= mild
-< 20 degC <= warm) times trip length (shorter or longer than the median
+six bins, temperature band (:data:`TEMPERATURE_BANDS_C`: cold < 5 °C <= mild
+< 20 °C <= warm) times trip length (shorter or longer than the median
 training distance), for the split and the CV+ step alike. A bin whose
 calibration trips are too few for the requested level
 (``ceil((n_b + 1) level) > n_b``) falls back to the pooled calibration, so
@@ -26,7 +26,7 @@ __all__ = ["TEMPERATURE_BANDS_C", "bin_names", "mondrian_bins", "mondrian_interv
            "mondrian_plan"]
 
 TEMPERATURE_BANDS_C = (5.0, 20.0)
-"""Edges of the cold / mild / warm temperature bands, degC."""
+"""Edges of the cold / mild / warm temperature bands, °C."""
 
 
 def mondrian_bins(table: pd.DataFrame, distance_cut_km: float) -> np.ndarray:

@@ -45,7 +45,7 @@ widening: its ``h`` stays below 1). A model saved before this rate has none
 **Held-out bands.** Split conformal scores a random share of the trips, whose
 conditions are those of the training trips: it has no trip between its fold's
 values, and a design of a few fixed conditions (speeds 40, 60, ... km/h; -5, 20
-and 32 degC) left the interpolation rate at the fixed 0.25 although its own data
+and 32 °C) left the interpolation rate at the fixed 0.25 although its own data
 can measure it. :func:`held_out_bands` makes such experiments: for each intensive
 quantity, its training values are grouped into clusters (consecutive values within
 a tolerance), and per quantity the interior cluster (neither the lowest nor the
@@ -66,8 +66,8 @@ fold ensembles share the standardisation).
 The rate *beyond* the conditions is not learned this way. Holding out an edge band
 needs the physics posterior refitted without it too (a posterior that saw the cold
 trips knows their heater), and one rate would then speak for every quantity: a model
-trained at 20 and 32 degC only can hold out a speed edge (where extrapolating is
-benign) but no temperature edge, and a rate learned there left its trips at -5 degC
+trained at 20 and 32 °C only can hold out a speed edge (where extrapolating is
+benign) but no temperature edge, and a rate learned there left its trips at -5 °C
 with 90 % intervals far too narrow (the learned rate also drops the physics posterior
 predictive floor). Beyond the data the fixed rate and that floor
 (:mod:`hybridev.learning.ood`) stay.
@@ -320,10 +320,10 @@ def held_out_bands(q: np.ndarray, max_bands: int = MAX_HELD_BANDS
     Examples
     --------
     >>> t = np.zeros((6, 5))
-    >>> t[:, 0] = [-5.0, -5.0, 20.0, 21.0, 32.0, 32.0]  # temperature, degC
-    >>> held_out_bands(t)  # 20-21 degC: interior, its values within 3 degC
+    >>> t[:, 0] = [-5.0, -5.0, 20.0, 21.0, 32.0, 32.0]  # temperature, °C
+    >>> held_out_bands(t)  # 20-21 °C: interior, its values within 3 °C
     [(0, 20.0, 21.0)]
-    >>> held_out_bands(t[[0, 1, 4, 5]])  # -5 and 32 degC: nothing to hold out between
+    >>> held_out_bands(t[[0, 1, 4, 5]])  # -5 and 32 °C: nothing to hold out between
     []
     """
     q = np.asarray(q, float)

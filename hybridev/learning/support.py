@@ -3,9 +3,9 @@
 The residual ensemble learns its correction at the conditions the car was logged at.
 Between two training values of an intensive condition (a temperature between two logged
 ones, a speed between two driven ones) the networks interpolate a shape they have no data
-for: a heater that switches on between -5 and 20 degC is, to them, a straight line from
-the correction at -5 degC to the one at 20 degC. On the structured benchmark (whose
-extra heating sets in below 5 degC) that line made the correction at 7.5 degC and
+for: a heater that switches on between -5 and 20 °C is, to them, a straight line from
+the correction at -5 °C to the one at 20 °C. On the structured benchmark (whose
+extra heating sets in below 5 °C) that line made the correction at 7.5 °C and
 50 km/h +6.4 % of the physics, where the physics alone is within 0.2 % of the truth
 (``evaluation/range_bands/range_bias.md``): the range bands there were pessimistic. The
 physics, by contrast, is a model of the whole temperature axis.
@@ -27,7 +27,7 @@ the support is 1: there the inputs are held at their edge and the out-of-domain
 machinery widens the interval (:mod:`hybridev.learning.ood`).
 
 The length scale is :data:`SUPPORT_LENGTH_TOLERANCES` domain tolerances of the quantity
-(:data:`~hybridev.learning.domain.DOMAIN_TOLERANCES`: 3 degC, 8 km/h, 1 % grade), so a
+(:data:`~hybridev.learning.domain.DOMAIN_TOLERANCES`: 3 °C, 8 km/h, 1 % grade), so a
 car logged densely (real logs: temperatures every few degrees) keeps its correction
 everywhere and only real gaps in its data revert to the physics.
 """
@@ -43,7 +43,7 @@ from hybridev.learning.domain import DOMAIN_QUANTITIES, DOMAIN_TOLERANCES, INTEN
 __all__ = ["SUPPORT_LENGTH_TOLERANCES", "GapRows", "gap_rows", "interpolation_support"]
 
 SUPPORT_LENGTH_TOLERANCES = 2.0
-"""Length scale of the support kernel, in domain tolerances (6 degC, 16 km/h, 2 %)."""
+"""Length scale of the support kernel, in domain tolerances (6 °C, 16 km/h, 2 %)."""
 
 
 def _column(table, name: str) -> np.ndarray | None:

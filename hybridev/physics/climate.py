@@ -25,7 +25,7 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
 
     Parameters
     ----------
-    temperature_c : float or array_like, degC
+    temperature_c : float or array_like, °C
         Ambient temperature.
     vehicle : VehicleParams, optional
         Supplies the four band powers ``hvac_kw`` (paper preset), or the
@@ -46,7 +46,7 @@ def hvac_power_kw(temperature_c, vehicle: VehicleParams | None = None) -> np.nda
     t = np.asarray(temperature_c, dtype=float)
     if not np.all(np.isfinite(t)):
         raise ValueError(f"temperature_c={temperature_c!r} contains NaN or infinite values; "
-                         "allowed range: finite degC")
+                         "allowed range: finite °C")
     if v.climate_model == "continuous":
         return steady_climate_kw(t, v)
     cold, cool, mild, hot = v.hvac_kw

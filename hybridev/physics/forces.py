@@ -290,7 +290,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     dt_s : float or array_like (n_trips,), s
     vehicle : VehicleParams, optional
     profile : DrivingProfile, str, or sequence of them (n_trips,)
-    temperature_c : float or array_like (n_trips,), degC
+    temperature_c : float or array_like (n_trips,), °C
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
     soc : float or array_like (n_trips,), optional
         State of charge at the trip's start (NaN or None: unknown); derates
@@ -339,7 +339,7 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     profile : DrivingProfile, str, or sequence of them (n_trips,)
         Driving profile(s); supplies efficiency multiplier, regen efficiency
         and mode auxiliary power.
-    temperature_c : float or array_like (n_trips,), degC
+    temperature_c : float or array_like (n_trips,), °C
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
     soc : float or array_like (n_trips,), optional
         State of charge at the trip's start (derates the regen limit).
@@ -352,7 +352,7 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
 
     Examples
     --------
-    Constant 90 km/h for 1 hour on the flat, normal profile, 20 degC:
+    Constant 90 km/h for 1 hour on the flat, normal profile, 20 °C:
 
     >>> e = trace_energy_kwh([25.0] * 3601, 1.0)
     >>> round(float(e), 2)   # 9.70 kW / 0.9 + 1.5 kW aux, for 1 h

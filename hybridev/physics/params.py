@@ -80,7 +80,7 @@ class VehicleParams:
         Base auxiliary power ``P_b`` in kW.
     hvac_kw : tuple of 4 float
         HVAC power in kW for ambient bands ``T < 0``, ``0 <= T < 15``,
-        ``15 <= T <= 25`` and ``T > 25`` degC (the paper's ``P_c(T)``).
+        ``15 <= T <= 25`` and ``T > 25`` °C (the paper's ``P_c(T)``).
     linear_drag_n_per_mps : float
         Road-load term linear in speed, in N per (m/s). Zero in the paper's
         model; non-zero when built from coast-down coefficients.
@@ -109,18 +109,18 @@ class VehicleParams:
         through the body and glazing plus the fresh-air (ventilation) stream,
         W/K. 110 W/K: ~60 W/K body/glazing plus ~50 W/K for ~0.05 kg/s of
         fresh air (x 1005 J/(kg K)); with ``t_set_c`` and ``cabin_gain_w`` it
-        gives ~2.7 kW of heat at -7 degC, which with a 5-6 kW heater reproduces the ANL/AAA cold
+        gives ~2.7 kW of heat at -7 °C, which with a 5-6 kW heater reproduces the ANL/AAA cold
         tests (see ``evaluation/real_weather/real_weather.md``).
     heater_max_kw : float
         Electrical rating of the cabin heater, kW (compact BEVs: 5-6 kW PTC,
         e.g. the Nissan Leaf's 5 kW element in the ANL tests).
     t_set_c : float
-        Cabin set point, degC (fleet studies find the efficiency optimum at
-        ~21.5 degC, Geotab 2020; ANL tests hold the cabin at 72 degF = 22 degC).
+        Cabin set point, °C (fleet studies find the efficiency optimum at
+        ~21.5 °C, Geotab 2020; ANL tests hold the cabin at 72 °F = 22 °C).
     cabin_gain_w : float
         Internal heat gains of the cabin (occupants ~100 W each sensible,
         electronics, sun through the glazing), W: heating starts below
-        ``t_set_c - cabin_gain_w / cabin_ua_w_per_k`` (17.4 degC by default);
+        ``t_set_c - cabin_gain_w / cabin_ua_w_per_k`` (17.4 °C by default);
         in warm weather they add to the A/C load.
     heating_offset_k : float
         Kelvin by which the driver's heating onset lies below the balance
@@ -144,7 +144,7 @@ class VehicleParams:
         warmer set point. Calibrated as ``heating_scale`` / ``cooling_scale``.
     ac_cop : float
         Coefficient of performance of the air conditioning (2-3 for
-        R134a/R1234yf automotive systems at 35 degC).
+        R134a/R1234yf automotive systems at 35 °C).
     ac_max_kw : float
         Electrical cap of the A/C compressor, kW.
     solar_gain_w : float
@@ -155,22 +155,22 @@ class VehicleParams:
         air plus the interior surfaces reached in the first minutes, kJ/K
         (~4 kJ/K of air, ~50-60 kJ/K of seats, trim and ducts). Warm-up energy
         ``C (T_b - T) / COP`` (bounded by the heater's spare power times the
-        trip duration): ~0.4 kWh at -7 degC, most of a 10-min winter trip's climate energy.
+        trip duration): ~0.4 kWh at -7 °C, most of a 10-min winter trip's climate energy.
     battery_warmup_kwh_per_k : float
         Energy the battery heater spends per kelvin below ``battery_heat_below_c``
         at the start of a trip, kWh/K (a ~350 kg compact-BEV pack at ~1 kJ/(kg K)
         holds ~0.1 kWh/K). Default 0. Many BEVs heat a cold pack while driving
         (Geotab 2023 and ADAC/Green NCAP 2024 attribute part of the winter loss
         to it), but when and how far is manufacturer-specific and unpublished,
-        and a default that heats the pack from 0 degC contradicts the
+        and a default that heats the pack from 0 °C contradicts the
         dynamometer data: it would move the ANL Nissan Leaf UDDS ratio at
-        -7 degC to +35 % and the WLTC ratio at -25 degC (Xu et al., Applied
+        -7 °C to +35 % and the WLTC ratio at -25 °C (Xu et al., Applied
         Energy 418, 2026) to +23 % of the measured values
         (``rw_curves.diagnosis_minus15`` in ``evaluation/real_weather``). The
         cold losses below carry the battery's cold penalty; set it for a car
         known to heat its pack.
     battery_heat_below_c : float
-        Pack temperature threshold of the battery heater, degC.
+        Pack temperature threshold of the battery heater, °C.
     cabin_soak_time_constant_s : float
         Time constant with which a parked cabin relaxes to ambient temperature,
         s. A trip that starts ``p`` seconds after the previous one ended (the
@@ -187,19 +187,19 @@ class VehicleParams:
     cold_traction_loss_per_k : float
         Extra traction energy per kelvin below ``cold_ref_c`` (fraction): cold
         battery resistance, viscous driveline losses, tyres and denser air.
-        0.004/K gives +11 % at -7 degC, the AAA 2019 / ANL finding of ~10 %
-        more energy at 20 degF with the heater off.
+        0.004/K gives +11 % at -7 °C, the AAA 2019 / ANL finding of ~10 %
+        more energy at 20 °F with the heater off.
     cold_regen_loss_per_k : float
         Loss of regenerative braking per kelvin below ``cold_ref_c``
         (fraction, capped at 0.8): the battery management limits charge
-        current into a cold pack. 0.01/K: -27 % at -7 degC. Owners report
+        current into a cold pack. 0.01/K: -27 % at -7 °C. Owners report
         regeneration "constrained until the battery warms up" below about
         10 °C (electriclifeblog, "Cooling off", 2016) and "temporarily
         reduced" at 3 °C (willemsplanet.com, 2021-12-17); no published
         curve of the limit against temperature was found, so the linear
         form is an assumption the calibration's ``regen_scale`` absorbs.
     cold_ref_c : float
-        Temperature below which the cold losses start, degC.
+        Temperature below which the cold losses start, °C.
     cold_soak_time_constant_s : float
         Time constant with which the tyres, driveline oil and pack of a parked
         car relax from driving temperature to ambient, s: a trip that starts
@@ -335,7 +335,7 @@ class VehicleParams:
             hv = ()
         if len(hv) != 4:
             raise ValueError(f"VehicleParams.hvac_kw={self.hvac_kw!r} must have 4 values "
-                             "(T<0, 0<=T<15, 15<=T<=25, T>25 degC)")
+                             "(T<0, 0<=T<15, 15<=T<=25, T>25 °C)")
         for i, x in enumerate(hv):
             _check_range(o, f"hvac_kw[{i}]", x, 0.0, 50.0)
         object.__setattr__(self, "hvac_kw", hv)

@@ -56,7 +56,7 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     vehicle : VehicleParams, optional
         Fixes the sign split and the defaults of :func:`energy_from_stats`.
     profile : DrivingProfile, str, or sequence of them (n_trips,)
-    temperature_c : float or array_like (n_trips,), degC
+    temperature_c : float or array_like (n_trips,), °C
     grade_rad : float or array_like broadcastable to ``speed_mps``, rad
     soc : float or array_like (n_trips,), optional
         State of charge at each trip's start (derates the regen limit along

@@ -53,10 +53,10 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
     traces : LoggedTraces
     vehicle : VehicleParams, optional
     profile : DrivingProfile, str, or sequence of them (n_trips,)
-    temperature_c : float or array_like (n_trips,), degC, optional
+    temperature_c : float or array_like (n_trips,), °C, optional
         Sets the HVAC band (paper preset), the warm-up and the cold-weather
         factors; default: the time mean of the logged temperature, else 20
-        degC. With the continuous climate model and a logged temperature, the
+        °C. With the continuous climate model and a logged temperature, the
         steady climate power is the time mean over the logged per-step
         temperatures.
     parked_s : float or array_like (n_trips,), s, optional

@@ -4,7 +4,7 @@ Used when ``VehicleParams.climate_model == "continuous"`` (the default of
 :meth:`~hybridev.physics.params.VehicleParams.from_coastdown`); the paper's
 four-band model stays in :func:`hybridev.physics.climate.hvac_power_kw`.
 
-Steady climate power at ambient temperature ``T`` (degC). Occupants and
+Steady climate power at ambient temperature ``T`` (°C). Occupants and
 devices add ``G_in`` (``cabin_gain_w``), so heating starts below the balance
 point ``T_b = T_set - G_in / UA - delta`` (:func:`heating_balance_c`; ``delta``
 = ``heating_offset_k``, the driver's heating onset below the physical balance
@@ -66,20 +66,20 @@ def _temps(temperature_c) -> np.ndarray:
     t = np.asarray(temperature_c, dtype=float)
     if not np.all(np.isfinite(t)):
         raise ValueError(f"temperature_c={temperature_c!r} contains NaN or infinite values; "
-                         "allowed range: finite degC")
+                         "allowed range: finite °C")
     return t
 
 
 def heat_pump_cop(temperature_c) -> np.ndarray:
     """Heating COP of an automotive heat pump at ambient temperature.
 
-    ``COP = clip(2.2 + 0.05 T, 1, 3)``: ~2.5 at 7 degC, ~1.9 at -7 degC and
-    1 (resistive back-up) from about -24 degC, the range reported for
+    ``COP = clip(2.2 + 0.05 T, 1, 3)``: ~2.5 at 7 °C, ~1.9 at -7 °C and
+    1 (resistive back-up) from about -24 °C, the range reported for
     R1234yf/R744 heat pumps in compact BEVs.
 
     Parameters
     ----------
-    temperature_c : float or array_like, degC
+    temperature_c : float or array_like, °C
 
     Returns
     -------
@@ -98,7 +98,7 @@ def _heating_cop(t: np.ndarray, v: VehicleParams) -> np.ndarray:
 
 
 def heating_balance_c(vehicle: VehicleParams) -> float:
-    """Ambient temperature below which the cabin is heated, degC.
+    """Ambient temperature below which the cabin is heated, °C.
 
     ``t_set_c - cabin_gain_w / cabin_ua_w_per_k - heating_offset_k``:
     occupants and devices keep the cabin at its set point down to the
@@ -147,7 +147,7 @@ def steady_climate_kw(temperature_c, vehicle: VehicleParams | None = None) -> np
 
     Parameters
     ----------
-    temperature_c : float or array_like, degC
+    temperature_c : float or array_like, °C
     vehicle : VehicleParams, optional
         Supplies ``heater_kind``, ``cabin_ua_w_per_k``, ``heater_max_kw``,
         ``t_set_c``, ``ac_cop``, ``ac_max_kw``, ``solar_gain_w`` (whatever its
@@ -203,7 +203,7 @@ def warmup_energy_kwh(start_temperature_c, duration_s, vehicle: VehicleParams | 
 
     Parameters
     ----------
-    start_temperature_c : float or array_like, degC
+    start_temperature_c : float or array_like, °C
         Ambient (soak) temperature at the start.
     duration_s : float or array_like, s
         Trip duration; bounds the energy to the heater's (A/C's) spare power
@@ -260,7 +260,7 @@ def cold_factors(temperature_c, vehicle: VehicleParams | None = None, parked_s=N
 
     Parameters
     ----------
-    temperature_c : float or array_like, degC
+    temperature_c : float or array_like, °C
     vehicle : VehicleParams, optional
     parked_s : float or array_like, s, optional
         Time parked since the previous trip (NaN or None: soaked to ambient).

@@ -29,7 +29,7 @@ class LoggedTraces:
     speed_mps : numpy.ndarray, shape (n_samples,), m/s
     grade_rad : numpy.ndarray, shape (n_samples,), rad
         Zero when neither elevation nor grade was logged.
-    temperature_c : numpy.ndarray, shape (n_samples,), degC, or None
+    temperature_c : numpy.ndarray, shape (n_samples,), °C, or None
     soc : numpy.ndarray, shape (n_samples,), or None
     hidden_pke_j_per_kg : numpy.ndarray, shape (n_trips,), J/kg, or None
         Positive kinetic energy per kg of vehicle that a coarse log hides

@@ -8,7 +8,7 @@ column              unit    meaning
 ``distance_km``     km      trip distance, (0, 2000]
 ``avg_speed_kmh``   km/h    time-mean speed, (0, 250]
 ``mode``            --      ``"eco"``, ``"normal"`` or ``"aggressive"``
-``temperature_c``   degC    ambient temperature, [-50, 60]
+``temperature_c``   °C    ambient temperature, [-50, 60]
 ``soc_initial``     --      state of charge at departure, [0, 1]
 ``hour``            h       optional: departure hour of day, [0, 24)
 ``grade_pct``       %       optional: mean road grade, [-30, 30]
@@ -71,7 +71,7 @@ def make_trips(n_trips: int = 1500, *, seed: int | np.random.Generator = 0) -> p
 
     Distance uniform over 20-200 km; mean speed drawn from {40, 60, 80, 100,
     120} km/h; initial SoC uniform over 0.3-1.0; modes split equally (then
-    shuffled); temperature drawn from {20, -5, 32} degC; departure hour uniform
+    shuffled); temperature drawn from {20, -5, 32} °C; departure hour uniform
     over the integers 0-23.
 
     Parameters

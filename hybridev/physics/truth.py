@@ -141,7 +141,7 @@ class StructuredTruthParams:
         ``R = r25 exp(Ea/R_g (1/T - 1/298.15 K)) (1 + a exp(-s / k))``.
     soc_smooth : float
         Softplus scale of the smooth floor of the trip-average SoC at 0.
-    ir_reference : (kW, degC, -)
+    ir_reference : (kW, °C, -)
         Power, temperature, SoC at which ``eta_d`` already holds the I^2 R loss.
     stops_per_km_peak, rush_hours, rush_width_h, offpeak_level : 1/km, (h, h), h, -
         Extra stops per km ``peak (offpeak + bump(8 h) + bump(17.5 h))``.
@@ -149,9 +149,9 @@ class StructuredTruthParams:
         Logistic ``1 / (1 + exp((v_bar - a) / b))``: congestion bites at low mean speed.
     stop_speed_kmh, stop_idle_s : km/h, s
         Speed shed and idle time per extra stop.
-    heat_kw_per_k, heat_onset_c, heat_smooth_k : kW/K, degC, K
+    heat_kw_per_k, heat_onset_c, heat_smooth_k : kW/K, °C, K
         Extra heating ``k w log(1 + exp((T_on - T) / w))``.
-    wind_drag_fraction, air_density_ref_c : -, degC
+    wind_drag_fraction, air_density_ref_c : -, °C
         Wind-averaged drag increase; temperature at which the vehicle's air
         density holds (ISA sea level).
     """
@@ -330,7 +330,7 @@ def make_dataset(n_trips: int = 1500, *, truth: str = "paper", seed: int = 0,
     -------
     pandas.DataFrame, (n_trips, 9)
         ``trip_id``, ``distance_km`` (km), ``avg_speed_kmh`` (km/h), ``mode``,
-        ``temperature_c`` (degC), ``soc_initial``, ``hour`` (h),
+        ``temperature_c`` (°C), ``soc_initial``, ``hour`` (h),
         ``energy_kwh`` (kWh, >= 0) and ``soc_final`` (``max(0, s0 - E*/C)``).
         No physics or oracle column: models compute their own.
 

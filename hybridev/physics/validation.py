@@ -63,7 +63,7 @@ class FieldRule:
 TRIP_RULES: dict[str, FieldRule] = {
     "distance_km": FieldRule(0.0, 2000.0, lo_open=True),
     "avg_speed_kmh": FieldRule(0.0, 250.0, lo_open=True),
-    "temperature_c": FieldRule(-50.0, 60.0, hint="degC; not kelvin or degF"),
+    "temperature_c": FieldRule(-50.0, 60.0, hint="°C; not kelvin or °F"),
     "soc_initial": FieldRule(0.0, 1.0, hint="a fraction; a SoC in percent divides by 100"),
     "hour": FieldRule(0.0, 24.0, hi_open=True),
     "grade_pct": FieldRule(-30.0, 30.0),
@@ -293,7 +293,7 @@ def validate_trips(trips: pd.DataFrame) -> pd.DataFrame:
     >>> validate_trips(t.assign(temperature_c=295.0))
     Traceback (most recent call last):
     ...
-    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]; also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0, allowed [-50, 60] (degC; not kelvin or degF)
+    ValueError: trips: 1 row(s) have an invalid 'distance_km'; first at row 0: distance_km=-1.0, allowed (0, 2000]; also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0, allowed [-50, 60] (°C; not kelvin or °F)
     """
     good, _ = check_table(trips, required=REQUIRED_TRIP_COLUMNS, rules=TRIP_RULES)
     return good

@@ -115,7 +115,7 @@ def test_regen_bound_does_not_loosen_on_cold_trips():
     prior's bound on regen_scale still comes from the warm profiles, so a posterior fitted
     on winter trips never regenerates more than the braking energy on a warm trip. The
     truth's car loses no regeneration in the cold and regenerates 1.3x the nominal, so the
-    model (which expects -25 % at -5 degC) wants ~1.3 / 0.7, beyond the bound 1 / 0.75."""
+    model (which expects -25 % at -5 °C) wants ~1.3 / 0.7, beyond the bound 1 / 0.75."""
     import dataclasses
 
     from hybridev.bayes.priors import REGEN_EFFICIENCY_MAX
@@ -185,7 +185,7 @@ def test_posterior_recovers_a_planted_heating_onset():
     """The truth starts heating 8 K below the default balance point (a driver dressed for
     the weather); the posterior's 99 % interval holds 8 K, its median is closer to 8 than
     to the nominal 0, and the heating scale stays near the truth's 1 (tolerance: 99 %
-    credible interval; 3 % noise, 300 trips at -15 to 35 degC)."""
+    credible interval; 3 % noise, 300 trips at -15 to 35 °C)."""
     truth = {"heating_offset_k": 8.0}
     m = simulate_measured(_trips(300, 3), CAR, true_params=truth, noise_rel=0.03, seed=4)
     post = _calibrate(m, params=("aux_base_kw",), groups=None)
@@ -197,9 +197,9 @@ def test_posterior_recovers_a_planted_heating_onset():
 
 
 def test_a_mild_weather_car_that_barely_heats_keeps_a_physical_heating_slope():
-    """Logged at 4-16 degC by a driver who heats only below ~6 degC (offset 11 K): the
+    """Logged at 4-16 °C by a driver who heats only below ~6 °C (offset 11 K): the
     posterior explains the little heating by a late onset, not by a tiny heating scale,
-    so a -15 degC trip is predicted within 20 % of the truth's energy (with the scale
+    so a -15 °C trip is predicted within 20 % of the truth's energy (with the scale
     alone, the calibration extrapolated about a tenth of the heating to the cold)."""
     truth = {"heating_offset_k": 11.0}
     trips = _trips(200, 5)

@@ -44,7 +44,7 @@ def test_from_coastdown_leaves_the_heater_to_the_data():
 
 @pytest.mark.parametrize("kind", ["ptc", "heat_pump"])
 def test_selects_the_true_heater_in_both_seasons(kind):
-    """Both seasons (-20 to 30 degC), 120 trips on 30 days, 2 % noise: the truth's kind wins with strong
+    """Both seasons (-20 to 30 °C), 120 trips on 30 days, 2 % noise: the truth's kind wins with strong
     evidence (|ln B| >= HEATER_EVIDENCE); checked over 3 seeds."""
     for seed in range(3):
         m = _measured(kind, seed=seed)

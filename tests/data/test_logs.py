@@ -231,14 +231,14 @@ def test_coarse_sampling_is_used_with_a_warning():
 
 
 def test_fahrenheit_trip_temperatures_warn_against_the_trace():
-    """Trip temperatures in degF beside a trace logged in degC: a DataWarning naming the
+    """Trip temperatures in °F beside a trace logged in °C: a DataWarning naming the
     first trip and both numbers; within the tolerance nothing is said."""
-    t = _trips(3).assign(temperature_c=[14.0, 50.0, 12.0])  # -10 / 10 degC in degF, 12 degC
+    t = _trips(3).assign(temperature_c=[14.0, 50.0, 12.0])  # -10 / 10 °C in °F, 12 °C
     ts = _series(["t0", "t1", "t2"])
     ts["amb_temp_c"] = np.repeat([-10.0, 10.0, 12.0], 60)
     with pytest.warns(DataWarning, match=r"2 of 3 trips have a temperature_c more than 10 K "
                       r"from their trace's mean amb_temp_c \(first: trip_id='t0', "
-                      r"temperature_c=14 against -10.0 degC\); degrees Fahrenheit"):
+                      r"temperature_c=14 against -10.0 °C\); degrees Fahrenheit"):
         m = measured_from_frames(t, ts)
     assert len(m.trips) == 3  # kept: a warning, not a rejection
     with warnings.catch_warnings():

@@ -20,12 +20,12 @@ def _table(temps, dist=10.0, speed=40.0, mode="eco"):
 
 
 def test_between_training_values_is_interpolated_beyond_them_is_not():
-    # the paper's design: -5, 20, 32 degC only; 3 and 14 degC lie between two of them
+    # the paper's design: -5, 20, 32 °C only; 3 and 14 °C lie between two of them
     dom = TrainingDomain.fit(_table([-5, 20, 32] * 4), np.zeros((12, 1)))
     score, ok = dom.score(_table([-5, -3, 3, 14, 21.5, 32, 40, -6.5]))
     assert ok.tolist() == [True, True, True, True, True, True, False, False]
     assert score[:6].tolist() == [0.0] * 6
-    assert score[-2] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 degC
+    assert score[-2] == pytest.approx(8 / 1)  # beyond the range: against a third of 3 °C
     assert score[-1] == pytest.approx(1.5)
     # beyond the range the score rises as the trip leaves the domain
     s, _ = dom.score(_table([32, 36, 45, 60]))
@@ -93,7 +93,7 @@ def test_model_flags_cold_trips_widens_them_and_warns_once(warm):
     cold = (test.temperature_c < 0).to_numpy()
     msg = str(next(w.message for w in rec if issubclass(w.category, OutOfDomainWarning)))
     assert f"(here: temperature {int(cold.sum())}" in msg  # says why, with the count
-    assert not out.in_domain[cold].any()  # every trip at -5 degC is flagged
+    assert not out.in_domain[cold].any()  # every trip at -5 °C is flagged
     rel = (out.energy_kwh_hi - out.energy_kwh_lo) / out.energy_kwh_pred
     assert rel[cold].median() > 1.5 * rel[out.in_domain].median()
     # the scale-free confidence rises out of the domain
@@ -147,8 +147,8 @@ def test_ood_spread_inflates_all_but_the_posterior_draws():
 
 def test_discrepancy_fades_to_the_calibrated_physics_out_of_the_domain():
     """Inside the training domain the physics column is the discrepancy-weighted physics;
-    far outside it (largest gap >= 9: the -5 degC trips of a model trained at 20 and
-    32 degC) it is the calibrated physics alone, and in between the linear blend."""
+    far outside it (largest gap >= 9: the -5 °C trips of a model trained at 20 and
+    32 °C) it is the calibrated physics alone, and in between the linear blend."""
     from hybridev.physics.stats import energy_from_stats
 
     d = make_dataset(300, truth="structured", seed=3, n_steps=100)

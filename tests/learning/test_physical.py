@@ -112,7 +112,7 @@ def test_range_finite_ordered_monotone(models, name, speed, temp, soc, mode):
     network inputs), for every model; from a fuller battery (``soc_initial`` is also a
     network input) for the physics-based models. The pure-ML baseline learns its own
     ``soc_initial`` effect, which far outside its 3.5-38 km training trips need not be
-    monotone (hypothesis found 5 km/h, -1 degC: 548 km from SoC 0.5, 513 km from 0.75)."""
+    monotone (hypothesis found 5 km/h, -1 °C: 548 km from SoC 0.5, 513 km from 0.75)."""
     m = models[name]
     c = pd.DataFrame({"avg_speed_kmh": [speed] * 3, "temperature_c": temp, "mode": mode})
     runs = [predict_range(m, c, soc_initial=soc, soc_reserve=[soc * 0.5, soc * 0.25, 0.0])]

@@ -64,7 +64,7 @@ def _stage_calls(call):
 
 
 def test_predict_interval_passes_the_components_once_in_order(model):
-    trips = _trips()  # six ordinary trips, one without a mode, one at -25 degC
+    trips = _trips()  # six ordinary trips, one without a mode, one at -25 °C
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         seen = _stage_calls(lambda: model.predict_interval(trips, 0.9))
@@ -96,7 +96,7 @@ def test_predict_distribution_is_the_raw_distribution_rescaled(model):
     np.testing.assert_allclose(dist.mean(), raw.mean(), rtol=1e-12)
     factor = np.broadcast_to(dist.spread_factor, (dist.n_trips,))
     assert np.all(factor >= model.calibrator_.spread_factor(0.9) - 1e-12)
-    assert factor[-1] > factor[0]  # the -25 degC trip is widened, an ordinary one not
+    assert factor[-1] > factor[0]  # the -25 °C trip is widened, an ordinary one not
 
 
 def test_components_hold_the_learned_state(model):

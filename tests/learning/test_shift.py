@@ -55,7 +55,7 @@ def test_a_rate_saved_before_the_interpolation_rate_does_not_widen_between():
 
 def test_ood_spread_widens_trips_between_training_values_by_the_learned_rate():
     dom = TrainingDomain.fit(_trips([-5.0, 20.0]), np.zeros((2, 1)))
-    a = dom.assess(_trips([19.0, 7.5]))  # 1 degC from 20; 12.5 degC from either
+    a = dom.assess(_trips([19.0, 7.5]))  # 1 °C from 20; 12.5 °C from either
     rate = GapRate().fit(np.zeros(20), np.zeros(20))  # no trips between: 0.25
     spread = OutOfDomainSpread(rate=rate)
     infl = spread.rate_inflation(a)
@@ -66,14 +66,14 @@ def test_ood_spread_widens_trips_between_training_values_by_the_learned_rate():
 def test_fold_gaps_give_the_interpolation_gap_of_each_folds_domain():
     t = _trips([0.0, 0.0, 20.0, 20.0, 10.0, 10.0])
     g, h = fold_gaps(t, np.array([0, 0, 1, 1, 2, 2]), interior=True)
-    assert g[4:].tolist() == [0.0, 0.0]  # 10 degC lies between 0 and 20 degC
+    assert g[4:].tolist() == [0.0, 0.0]  # 10 °C lies between 0 and 20 °C
     np.testing.assert_allclose(h[4:], [10 / 3, 10 / 3])
     np.testing.assert_array_equal(fold_gaps(t, np.array([0, 0, 1, 1, 2, 2])), g)
 
 
 def _ood_inputs():
-    """A trip in the domain (19 degC) and one beyond it (40 degC) of a model trained at
-    0 and 20 degC, whose raw spread (posterior draws) is far wider than its calibrated
+    """A trip in the domain (19 °C) and one beyond it (40 °C) of a model trained at
+    0 and 20 °C, whose raw spread (posterior draws) is far wider than its calibrated
     interval."""
     from hybridev.learning.steps import CalibratedInterval, RawPrediction
 
@@ -119,7 +119,7 @@ def _design(n=300, seed=0):
 
 def test_held_out_bands_are_the_interior_values_farthest_from_their_neighbours():
     q = _design()
-    # temperature: 20 degC is 12 degC (4 tolerances) from 32; speed: 60 km/h the first of
+    # temperature: 20 °C is 12 °C (4 tolerances) from 32; speed: 60 km/h the first of
     # three interior values 20 km/h (2.5 tolerances) from their neighbours
     assert held_out_bands(q) == [(0, 20.0, 20.0), (1, 60.0, 60.0)]
     assert held_out_bands(q, max_bands=1) == [(0, 20.0, 20.0)]
@@ -151,7 +151,7 @@ def test_band_scores_refit_without_the_band_and_score_its_unseen_trips():
     in_v = scored[q[scored, 1] == 60.0]
     assert len(s) == len(in_t) + len(in_v)
     np.testing.assert_array_equal(s, np.r_[np.full(len(in_t), 10.0), np.full(len(in_v), 11.0)])
-    # 20 degC between -5 and 32 (12 degC, 4 tolerances); 60 km/h between 40 and 80 (20
+    # 20 °C between -5 and 32 (12 °C, 4 tolerances); 60 km/h between 40 and 80 (20
     # km/h, 2.5 tolerances), each against the values its refit kept
     np.testing.assert_allclose(h, np.r_[np.full(len(in_t), 4.0), np.full(len(in_v), 2.5)])
     # the scores join the interpolation rate, against the in-domain quantile
@@ -170,7 +170,7 @@ def test_split_conformal_fit_learns_the_interpolation_rate_from_held_out_bands()
     m = HybridModel(n_members=2, max_epochs=40, n_steps=200).fit(data, seed=0)
     r = m.gap_rate_
     # its calibration trips share the training conditions: only the held-out bands
-    # (20 degC, 60 km/h) give trips between training values; none beyond: fixed rate
+    # (20 °C, 60 km/h) give trips between training values; none beyond: fixed rate
     assert r.n_interp_ >= 9
     assert r.n_shifted_ == 0 and not r.learned_
 

@@ -22,10 +22,10 @@ def test_support_is_one_at_and_near_training_values_and_fades_in_wide_gaps():
     dom = TrainingDomain.fit(_table([-5, 20, 32, 60] * 3), np.zeros((12, 1)))
     w = interpolation_support(_table([-5, 20, 32, 26, 7.5, -2.5, 46, -30, 80]), dom)
     assert w[:3].tolist() == [1.0, 1.0, 1.0]  # at every training value
-    assert w[3] == 1.0  # 6 degC from 20 and from 32: two neighbours support it
-    assert 0.0 < w[4] < 0.3  # the middle of a 25 degC gap: mostly the physics
+    assert w[3] == 1.0  # 6 °C from 20 and from 32: two neighbours support it
+    assert 0.0 < w[4] < 0.3  # the middle of a 25 °C gap: mostly the physics
     assert w[5] > w[4]  # nearer a training value: more support
-    assert 0.0 < w[6] < 0.2  # 14 degC from 32 and from 60
+    assert 0.0 < w[6] < 0.2  # 14 °C from 32 and from 60
     assert w[7:].tolist() == [1.0, 1.0]  # beyond the range: held inputs, not reverted
     assert np.all((w >= 0.0) & (w <= 1.0))
     assert interpolation_support(_table([7.5]), None) is None
@@ -42,7 +42,7 @@ def test_support_multiplies_over_the_intensive_quantities_and_ignores_missing_on
     only_speed = interpolation_support({"avg_speed_kmh": np.array([80.0])}, dom)
     assert only_speed[0] == pytest.approx(speed)
     # the length scale is in tolerances: the middle of a gap of 4 length scales (8
-    # tolerances of 3 degC) lies 2 length scales from each side, k = exp(-2) each
+    # tolerances of 3 °C) lies 2 length scales from each side, k = exp(-2) each
     k = np.exp(-2.0)
     gap = 4 * SUPPORT_LENGTH_TOLERANCES * 3.0
     d2 = TrainingDomain.fit(_table([0.0, gap] * 2), np.zeros((4, 1)))
@@ -52,7 +52,7 @@ def test_support_multiplies_over_the_intensive_quantities_and_ignores_missing_on
 
 @pytest.fixture(scope="module")
 def gap_model():
-    data = make_dataset(160, seed=3)  # the paper's design: -5, 20 and 32 degC only
+    data = make_dataset(160, seed=3)  # the paper's design: -5, 20 and 32 °C only
     return HybridModel(**FAST).fit(data, seed=0)
 
 
@@ -107,7 +107,7 @@ def test_raw_distributions_take_a_refit_domain_for_held_out_bands(gap_model):
     m = gap_model
     trips = _table([20.0], speed=60.0).assign(hour=8.0, soc_initial=0.8)
     vals = list(m.domain_.values)
-    vals[0] = vals[0][vals[0] != 20.0]  # the refit never saw 20 degC
+    vals[0] = vals[0][vals[0] != 20.0]  # the refit never saw 20 °C
     band = replace(m.domain_, values=tuple(vals))
     own = raw_distributions(m, trips)[0][0]
     held = raw_distributions(m, trips, domain=band)[0][0]

@@ -72,8 +72,8 @@ def test_heat_pump_cop_range():
 
 
 def test_warmup_dominates_short_winter_trips():
-    """A 5-minute trip at 0 degC spends more on the warm-up than on steady heating,
-    a 2-hour trip the other way round; at -10 degC a 5-minute trip runs the heater
+    """A 5-minute trip at 0 °C spends more on the warm-up than on steady heating,
+    a 2-hour trip the other way round; at -10 °C a 5-minute trip runs the heater
     flat out."""
     for dur_s, warm_wins in ((300.0, True), (7200.0, False)):
         warm = warmup_energy_kwh(0.0, dur_s, CONT)
@@ -163,7 +163,7 @@ def test_battery_warmup_is_pack_heat_below_threshold_bounded_by_heater(t, k, thr
 
 
 def test_battery_warmup_reaches_the_trip_energy_once_per_trip():
-    """A pack heated from -15 degC to 0 degC at 0.1 kWh/K costs 1.5 kWh per trip, on a
+    """A pack heated from -15 °C to 0 °C at 0.1 kWh/K costs 1.5 kWh per trip, on a
     20-minute and on a 60-minute trip alike (the heater's 5.5 kW allow it in both); on a
     10-minute trip the heater's rating caps it at 5.5 kW x 1/6 h."""
     v = VehicleParams.from_coastdown(140.0, 0.6, 0.028, 1700.0)

@@ -20,7 +20,7 @@ PHYSICS_COLUMNS = ["energy_kwh_physics", "soc_final_physics", "max_speed_kmh",
 
 
 def baseline_table():
-    """The paper's baseline scenario: 100 km at 90 km/h, 80 % SoC, 20 degC."""
+    """The paper's baseline scenario: 100 km at 90 km/h, 80 % SoC, 20 °C."""
     return pd.DataFrame({"distance_km": 100.0, "avg_speed_kmh": 90.0, "mode": list(PROFILES),
                          "temperature_c": 20.0, "soc_initial": 0.8})
 

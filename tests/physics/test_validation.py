@@ -91,7 +91,7 @@ def test_every_invalid_field_is_named_in_one_error():
     assert "also 1 row(s) have an invalid 'temperature_c'; first at row 0: temperature_c=295.0" in msg
     assert "also 2 row(s) have an invalid 'soc_initial'; first at row 1: soc_initial=80.0, " \
            "allowed [0, 1] (a fraction; a SoC in percent divides by 100)" in msg
-    assert "allowed [-50, 60] (degC; not kelvin or degF)" in msg  # the likely unit mix-up
+    assert "allowed [-50, 60] (°C; not kelvin or °F)" in msg  # the likely unit mix-up
 
 
 def test_speed_boundary_250_is_allowed():
