@@ -14,6 +14,7 @@ point into ``hybridev.fleet`` and that ``import hybridev`` loads no dask.
 """
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -179,3 +180,12 @@ def test_import_hybridev_is_light():
                           "{'torch', 'sklearn', 'emcee', 'matplotlib'}))"],
                          capture_output=True, text=True, check=True)
     assert res.stdout.strip() == "[]"
+
+
+def test_library_text_writes_temperatures_one_way():
+    """Docstrings, comments and messages write °C (and °F), never degC or degF."""
+    pkg = Path(hybridev.__file__).parent
+    bad = [f"{p.relative_to(pkg)}:{i}" for p in sorted(pkg.rglob("*.py"))
+           for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+           if re.search(r"\bdeg ?[CF]\b", line)]
+    assert bad == []

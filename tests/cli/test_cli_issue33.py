@@ -111,7 +111,7 @@ def test_units_written_one_way(capsys):
     subs = next(a for a in parser._actions if hasattr(a, "choices") and a.choices)
     for sp in subs.choices.values():
         text = sp.format_help()
-        assert "°C" not in text and "deg C" not in text
+        assert "degC" not in text and "deg C" not in text
         assert not re.search(r"(?<![-_])\b(kwh|KWH|Kwh|kmh|kph)\b", text), text
 
 
