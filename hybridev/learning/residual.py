@@ -30,7 +30,7 @@ import torch
 
 from hybridev.learning.features import _feature_matrix, fit_standardizer, trip_features
 from hybridev.learning.nn import EnsembleMLP, n_parameters, train_ensemble
-from hybridev.learning.support import gap_rows, interpolation_support
+from hybridev.learning.support import interpolation_support, support_and_gaps
 
 __all__ = ["MIN_BLOCK_ROWS", "PREDICT_BLOCK_ROWS", "ResidualLearner", "hold_distances",
            "hold_inputs", "residual_scale"]
@@ -260,23 +260,23 @@ class ResidualLearner:
                 held, factor = hold_inputs(table, distance_range, self.relative)
                 scale = self.target_scale(_column(table, "energy_kwh_physics"),
                                           _column(table, "distance_km")) * factor
-                inputs[e] = (self.features(held, domain), scale,
-                             interpolation_support(table, domain), held)
-            x, scale, support, held = inputs[e]
+                # the held table differs from the trips' only in distance and energy:
+                # one bracketing gives the support and the gaps
+                inputs[e] = (self.features(held, domain), scale, held,
+                             *support_and_gaps(table, domain))
+            x, scale, held, support, gaps = inputs[e]
             mean, var = self.moments(x, scale, net=net, support=support)
-            out.append((mean, self._gap_noise(held, scale, var, net, domain)))
+            out.append((mean, self._gap_noise(held, scale, var, net, domain, gaps)))
         return out
 
-    def _gap_noise(self, table, scale, var, net, domain):
+    def _gap_noise(self, table, scale, var, net, domain, gaps):
         """Member noise variances (n_members, n_trips) with each trip in a gap between
         training values drawn toward the noise at the bracketing values: ``w var(x) +
         (1 - w) var_ab`` per gap quantity, ``var_ab`` the log-linear interpolation between
         the noise of the same trip with that quantity set to the lower and to the upper
-        training value, ``w`` the support (:mod:`hybridev.learning.support`)."""
-        if var is None:
-            return var
-        gaps = gap_rows(table, domain)
-        if not gaps:
+        training value, ``w`` the support, ``gaps`` the trips in a gap
+        (:func:`~hybridev.learning.support.support_and_gaps`)."""
+        if not gaps or var is None:
             return var
         var = var.copy()
         scale = np.broadcast_to(np.asarray(scale, float), (var.shape[1],))

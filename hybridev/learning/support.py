@@ -40,7 +40,8 @@ import numpy as np
 
 from hybridev.learning.domain import DOMAIN_QUANTITIES, DOMAIN_TOLERANCES, INTENSIVE
 
-__all__ = ["SUPPORT_LENGTH_TOLERANCES", "GapRows", "gap_rows", "interpolation_support"]
+__all__ = ["SUPPORT_LENGTH_TOLERANCES", "GapRows", "gap_rows", "interpolation_support",
+           "support_and_gaps"]
 
 SUPPORT_LENGTH_TOLERANCES = 2.0
 """Length scale of the support kernel, in domain tolerances (6 °C, 16 km/h, 2 %)."""
@@ -72,10 +73,6 @@ def _brackets(x: np.ndarray, values: np.ndarray, ell: float):
     return np.where(inside, np.clip(w, 0.0, 1.0), 1.0), a, b
 
 
-def _bracket_support(x: np.ndarray, values: np.ndarray, ell: float) -> np.ndarray:
-    return _brackets(x, values, ell)[0]
-
-
 @dataclass(frozen=True)
 class GapRows:
     """The trips inside a gap of one intensive quantity (support below 1).
@@ -102,6 +99,34 @@ class GapRows:
     t: np.ndarray
 
 
+def support_and_gaps(table, domain) -> tuple[np.ndarray | None, list[GapRows]]:
+    """:func:`interpolation_support` and :func:`gap_rows` of a table, bracketed once.
+
+    Returns
+    -------
+    support : numpy.ndarray, shape (n_trips,), or None
+        The product of the supports over the intensive quantities present (None
+        without a domain or without any of them).
+    gaps : list of GapRows
+        The trips in a gap, per quantity (empty without a domain).
+    """
+    support, gaps = None, []
+    if domain is None:
+        return support, gaps
+    for j, name in enumerate(DOMAIN_QUANTITIES):
+        x = _column(table, name) if INTENSIVE[j] else None
+        if x is None:
+            continue
+        ell = SUPPORT_LENGTH_TOLERANCES * DOMAIN_TOLERANCES[j]
+        w, a, b = _brackets(x, np.asarray(domain.values[j], float), ell)
+        support = w if support is None else support * w
+        rows = np.flatnonzero(w < 1.0)
+        if rows.size:
+            lo, hi = a[rows], b[rows]
+            gaps.append(GapRows(name, rows, w[rows], lo, hi, (x[rows] - lo) / (hi - lo)))
+    return support, gaps
+
+
 def gap_rows(table, domain) -> list[GapRows]:
     """The trips in a gap between training values, per intensive quantity.
 
@@ -109,20 +134,7 @@ def gap_rows(table, domain) -> list[GapRows]:
     values (:meth:`hybridev.learning.residual.ResidualLearner.predict_moments`): the
     noise head interpolates as blindly as the mean. Empty without a domain.
     """
-    out = []
-    if domain is None:
-        return out
-    for j, name in enumerate(DOMAIN_QUANTITIES):
-        x = _column(table, name) if INTENSIVE[j] else None
-        if x is None:
-            continue
-        ell = SUPPORT_LENGTH_TOLERANCES * DOMAIN_TOLERANCES[j]
-        w, a, b = _brackets(x, np.asarray(domain.values[j], float), ell)
-        rows = np.flatnonzero(w < 1.0)
-        if rows.size:
-            lo, hi = a[rows], b[rows]
-            out.append(GapRows(name, rows, w[rows], lo, hi, (x[rows] - lo) / (hi - lo)))
-    return out
+    return support_and_gaps(table, domain)[1]
 
 
 def interpolation_support(table, domain) -> np.ndarray | None:
@@ -152,16 +164,4 @@ def interpolation_support(table, domain) -> np.ndarray | None:
     >>> interpolation_support(t, dom).round(2).tolist()
     [1.0, 1.0, 0.23, 1.0]
     """
-    if domain is None:
-        return None
-    out = None
-    for j, name in enumerate(DOMAIN_QUANTITIES):
-        if not INTENSIVE[j]:
-            continue
-        x = _column(table, name)
-        if x is None:
-            continue
-        ell = SUPPORT_LENGTH_TOLERANCES * DOMAIN_TOLERANCES[j]
-        w = _bracket_support(x, np.asarray(domain.values[j], float), ell)
-        out = w if out is None else out * w
-    return out
+    return support_and_gaps(table, domain)[0]
