@@ -326,7 +326,8 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
                                   nets=[net], domain=held.get("domain"))[0][0]
         return (e_meas[rows] - d.mean()) / np.maximum(d.std(), 1e-12)
 
-    return band_scores(q, split.rest, split.cal, refit, score)
+    return band_scores(q, split.rest, split.cal, refit, score,  # paired: the same trips
+                       reference=model.calibrator_.conformal_.residuals)
 
 
 def fit_summary(model, good: pd.DataFrame, split: FitSplit, heater, seed: int,

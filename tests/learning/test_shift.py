@@ -175,6 +175,35 @@ def test_split_conformal_fit_learns_the_interpolation_rate_from_held_out_bands()
     assert r.n_shifted_ == 0 and not r.learned_
 
 
+def test_paired_band_scores_measure_the_gap_not_how_hard_the_band_is():
+    """A band whose trips the final model (which saw the band) already errs on by as much
+    as the refit does needs no widening for the gap; a refit twice as far off does."""
+    q = _design()
+    rest, scored = np.arange(0, 200), np.arange(200, 300)
+    ref = np.random.default_rng(4).standard_normal(len(scored))
+    ref[q[scored, 0] == 20.0] *= 2.0  # 20 °C is hard for every model
+    pos = {int(r): i for i, r in enumerate(scored)}
+
+    def score_as(factor):
+        return lambda rows, net: factor * ref[[pos[int(r)] for r in rows]]
+
+    same, h = band_scores(q, rest, scored, lambda keep, k: k, score_as(1.0))
+    paired, h2 = band_scores(q, rest, scored, lambda keep, k: k, score_as(1.0), reference=ref)
+    worse, _ = band_scores(q, rest, scored, lambda keep, k: k, score_as(2.0), reference=ref)
+    np.testing.assert_array_equal(h, h2)
+    base = np.r_[ref, np.zeros(0)]
+
+    def rate(s):
+        return GapRate().fit(np.r_[base, s], np.zeros(len(base) + len(s)),
+                             interp=np.r_[np.zeros(len(base)), h]).interp_rate_
+
+    assert rate(same) > 0.1  # unpaired: the band's own difficulty read as the gap's
+    assert rate(paired) == 0.0  # paired: the refit errs no more than the final model
+    assert rate(worse) > 0.2
+    with pytest.raises(ValueError, match="reference"):
+        band_scores(q, rest, scored, lambda keep, k: k, score_as(1.0), reference=ref[:3])
+
+
 def test_bands_holding_too_few_scored_trips_are_not_refitted():
     q = _design()
     calls = []
