@@ -302,7 +302,8 @@ def held_band_scores(model, good: pd.DataFrame, traces, split: FitSplit, e_meas:
     """Split conformal: scores and interpolation gaps of the calibration trips of
     held-out interior bands (:func:`hybridev.learning.shift.band_scores`), each scored
     by the residual ensemble refitted without its band (same architecture, early
-    stopping on the validation trips outside the band) and the model's physics."""
+    stopping on the validation trips outside the band) and the model's physics, and
+    paired with the final model's calibration scores of the same trips."""
     learner = model.learner_
     table = model.physics_.table(good, traces)
     e_p = table["energy_kwh_physics"].to_numpy(float)
