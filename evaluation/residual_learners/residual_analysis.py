@@ -1,0 +1,294 @@
+"""Residual analysis: what in M1's trip data explains the physics part's held-out error?
+
+Run from the repository root, after ``gate_capture.py --only M1`` filled the cache (seconds)::
+
+    python evaluation/residual_learners/residual_analysis.py [--cache DIR] [--data DIR]
+        [--out DIR]
+
+Writes ``RESIDUAL_ANALYSIS.md`` and ``residual_analysis.json`` (into ``--out``, default
+this folder). Inputs: the cache of ``gate_capture.py`` (``HybridModel`` defaults,
+3 outer folds grouped by date; the committed output was made from a cache written by
+the library at this commit) and the M1 trip table and 1 Hz traces (read only, from
+``--data``; nothing of them is written here but per-variable statistics).
+
+The residual is the relative error ``(E* - E_p) / E_p`` of the calibrated physics part:
+*held-out* (each trip once: the outer fold's deployed physics on its held-out days) and
+*training OOF* (each outer fold's training days scored by the CV+ fold physics that did
+not see the day; each trip twice). Per candidate variable ``x`` (the table lists them;
+*diagnostic* ones are measured during the trip from the battery itself, so they may
+explain but cannot be model inputs):
+
+1. **Association**, held-out: Pearson ``r``; the slope (residual points per unit of
+   ``x``) with its standard error clustered by day (sandwich, 20 days) and ``t``;
+   ``r`` *within days* (residual and ``x`` less their day means) and *between days*
+   (day means, one point per day); training OOF ``r`` as a check of sign and size.
+2. **Variance split**: the share of the held-out residual's variance that lies between
+   days, and the MAPE if every day's mean residual were known (an oracle of the level).
+3. **Cross-fitted screen** (non-diagnostic variables): per outer fold, fit
+   ``rel = a + b (x - mean x)`` on that fold's training OOF residuals (least squares),
+   correct the held-out physics by ``E_p (1 + b (x - mean x))`` (the slope only: the
+   training intercept is the CV+ folds' level, not the deployed physics'), and score
+   MAPE per fold; also the shift of each fold's held-out mean that the slope predicts,
+   beside the fold's actual mean residual.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import residual_learners as rl  # noqa: E402
+
+# name: (description, unit, diagnostic?)
+VARIABLES = {
+    "temperature_c": ("trip-mean ambient", "°C", False),
+    "temp_range_c": ("ambient max - min over the trip", "K", False),
+    "hour": ("start time of day", "h", False),
+    "parked_h": ("parked before the trip (unknown: 12 h)", "h", False),
+    "first_of_day": ("first trip of its day (0/1)", "", False),
+    "voltage_start_v": ("pack voltage at the start (state-of-charge proxy)", "V", False),
+    "counter_mwh": ("car's discharge counter at the start (calendar/odometer)", "MWh", False),
+    "distance_km": ("distance", "km", False),
+    "duration_h": ("duration", "h", False),
+    "mean_speed_kmh": ("mean speed", "km/h", False),
+    "max_speed_kmh": ("max speed", "km/h", False),
+    "idle_frac": ("share of time below 1 km/h", "", False),
+    "pke_mps2": ("positive kinetic energy per metre", "m/s²", False),
+    "stops_per_km": ("stops (from >= 5 km/h to < 1 km/h) per km", "1/km", False),
+    "speed_cv": ("speed sd / mean while moving", "", False),
+    "grade_net_pct": ("net elevation change / distance", "%", False),
+    "climb_m_per_km": ("elevation gain / distance", "m/km", False),
+    "aux_standstill_kw": ("battery power at standstill (auxiliaries, HVAC)", "kW", True),
+    "regen_ratio": ("regenerated / discharged energy", "", True),
+    "voltage_drop_v_per_kwh": ("(start - end voltage) / net energy", "V/kWh", True),
+}
+
+
+def trip_variables(data: Path, labels: pd.Index, trips: pd.DataFrame) -> pd.DataFrame:
+    """One row per cached trip label with the candidate variables."""
+    src = pd.read_csv(data / "trips.csv").set_index("trip_id")
+    src.index = src.index.astype(str)
+    ids = trips.loc[labels, "trip_id"].astype(str).to_numpy()
+    s = src.loc[ids]
+    s.index = labels
+    ts = pd.read_parquet(data / "timeseries_1hz.parquet", columns=["trip_id", "speed_kmh"])
+    ts["trip_id"] = ts["trip_id"].astype(str)
+    by = {}
+    for tid, g in ts.groupby("trip_id", sort=False):
+        v = g["speed_kmh"].to_numpy(float)
+        moving = v[v >= 1.0]
+        stop = v < 1.0
+        going = np.maximum.accumulate(np.where(v >= 5.0, np.arange(v.size), -1)) >= 0
+        starts = stop & ~np.r_[True, stop[:-1]] & going
+        by[tid] = (int(starts.sum()), float(moving.std() / moving.mean()) if moving.size else 0.0)
+    trace = pd.DataFrame(by, index=["stops", "speed_cv"]).T.loc[ids]
+    trace.index = labels
+    t0 = pd.to_datetime(s["start_time_local"], errors="coerce")
+    parked = pd.to_numeric(trips.loc[labels, "parked_min"], errors="coerce") / 60.0
+    day = trips.loc[labels, "date"].astype(str)
+    order = t0.groupby(day).rank(method="first")
+    out = pd.DataFrame({
+        "day": day,
+        "temperature_c": s["amb_temp_mean_c"],
+        "temp_range_c": s["amb_temp_max_c"] - s["amb_temp_min_c"],
+        "hour": t0.dt.hour + t0.dt.minute / 60.0,
+        "parked_h": parked.fillna(12.0).clip(upper=12.0),
+        "first_of_day": (order == 1).astype(float).where(t0.notna()),
+        "voltage_start_v": s["batt_voltage_start_v"],
+        "counter_mwh": s["counter_disc_start_kwh"] / 1000.0,
+        "distance_km": s["distance_km"],
+        "duration_h": s["duration_s"] / 3600.0,
+        "mean_speed_kmh": s["mean_speed_kmh"],
+        "max_speed_kmh": s["max_speed_kmh"],
+        "idle_frac": s["idle_time_frac"],
+        "pke_mps2": s["pke_mps2"],
+        "stops_per_km": trace["stops"] / s["distance_km"],
+        "speed_cv": trace["speed_cv"],
+        "grade_net_pct": 0.1 * s["elev_net_m"] / s["distance_km"],
+        "climb_m_per_km": s["elev_gain_m"] / s["distance_km"],
+        "aux_standstill_kw": s["p_batt_standstill_mean_kw"],
+        "regen_ratio": s["e_batt_regen_kwh"] / s["e_batt_discharge_kwh"],
+        "voltage_drop_v_per_kwh": (s["batt_voltage_start_v"] - s["batt_voltage_end_v"])
+        / s["e_batt_net_kwh"]}, index=labels)
+    return out
+
+
+def residuals(cache: Path) -> pd.DataFrame:
+    rows = []
+    for k, f in enumerate(sorted(cache.glob("M1_fold*.npz"))):
+        z = np.load(f, allow_pickle=True)
+        rows.append(pd.DataFrame({"label": z["test_labels"], "fold": k, "kind": "held-out",
+                                  "y": z["y_te"], "p": z["p_te"]}))
+        rows.append(pd.DataFrame({"label": z["labels"], "fold": k, "kind": "training OOF",
+                                  "y": z["e"], "p": z["p"]}))
+    r = pd.concat(rows, ignore_index=True)
+    r["rel"] = (r["y"] - r["p"]) / r["p"]
+    return r
+
+
+def mape(y, p) -> float:
+    return float(100 * np.mean(np.abs(np.asarray(y) - np.asarray(p)) / np.asarray(y)))
+
+
+def clustered_slope(x, y, g) -> tuple[float, float]:
+    """OLS slope of ``y`` on ``x`` and its standard error clustered by ``g``."""
+    X = np.column_stack([np.ones_like(x), x])
+    xtx_inv = np.linalg.inv(X.T @ X)
+    beta = xtx_inv @ X.T @ y
+    e = y - X @ beta
+    meat = np.zeros((2, 2))
+    groups = pd.unique(g)
+    for grp in groups:
+        s = g == grp
+        u = X[s].T @ e[s]
+        meat += np.outer(u, u)
+    c = len(groups) / (len(groups) - 1)
+    v = c * xtx_inv @ meat @ xtx_inv
+    return float(beta[1]), float(np.sqrt(v[1, 1]))
+
+
+def association(h: pd.DataFrame, t: pd.DataFrame, name: str) -> dict:
+    ok = h[name].notna().to_numpy()
+    x, y, g = h[name].to_numpy(float)[ok], 100 * h["rel"].to_numpy(float)[ok], \
+        h["day"].to_numpy()[ok]
+    b, se = clustered_slope(x, y, g)
+    d = pd.DataFrame({"x": x, "y": y, "g": g})
+    dm = d.groupby("g")[["x", "y"]].transform("mean")
+    xw, yw = d["x"] - dm["x"], d["y"] - dm["y"]
+    r_w = float(np.corrcoef(xw, yw)[0, 1]) if xw.std() > 0 else float("nan")
+    dd = d.groupby("g")[["x", "y"]].mean()
+    r_b = float(np.corrcoef(dd["x"], dd["y"])[0, 1]) if dd["x"].std() > 0 else float("nan")
+    tk = t[t[name].notna()]
+    return {"n": int(ok.sum()), "r": round(float(np.corrcoef(x, y)[0, 1]), 3),
+            "slope_pct": b, "se_pct": se, "t": round(b / se, 2) if se > 0 else None,
+            "r_within": round(r_w, 3), "r_between": round(r_b, 3),
+            "r_oof": round(float(np.corrcoef(tk[name], tk["rel"])[0, 1]), 3)}
+
+
+def screen(r: pd.DataFrame, name: str) -> dict:
+    """Cross-fitted one-variable slope correction (see the docstring, step 3)."""
+    per_fold, shift, ys, ps = [], [], [], []
+    for k in sorted(r["fold"].unique()):
+        tr = r[(r["fold"] == k) & (r["kind"] == "training OOF") & r[name].notna()]
+        te = r[(r["fold"] == k) & (r["kind"] == "held-out")]
+        xm = float(tr[name].mean())
+        b = float(np.polyfit(tr[name] - xm, tr["rel"], 1)[0])
+        dx = (te[name].fillna(xm) - xm).to_numpy(float)
+        p = te["p"].to_numpy(float) * (1.0 + b * dx)
+        per_fold.append(round(mape(te["y"], p), 2))
+        shift.append(round(100 * b * float(dx.mean()), 2))
+        ys.append(te["y"].to_numpy(float))
+        ps.append(p)
+    return {"pooled": round(mape(np.concatenate(ys), np.concatenate(ps)), 2),
+            "by_fold": per_fold, "predicted_level_shift_pct": shift}
+
+
+def analyse(cache: Path, data: Path) -> dict:
+    trips = pd.read_pickle(cache / "M1_trips.pkl")
+    r = residuals(cache)
+    v = trip_variables(data, pd.Index(sorted(r["label"].unique())), trips)
+    r = r.join(v, on="label")
+    h, t = r[r["kind"] == "held-out"], r[r["kind"] == "training OOF"]
+    rel = 100 * h["rel"]
+    day_mean = rel.groupby(h["day"]).transform("mean")
+    fold_mean = rel.groupby(h["fold"]).transform("mean")
+    base = {"pooled": round(mape(h["y"], h["p"]), 2),
+            "by_fold": [round(mape(g["y"], g["p"]), 2) for _, g in h.groupby("fold")]}
+
+    def with_level(level_pct):
+        return round(mape(h["y"], h["p"] * (1.0 + level_pct / 100.0)), 2)
+
+    split = {"var_total": round(float(rel.var(ddof=0)), 2),
+             "var_between_days": round(float(day_mean.var(ddof=0)), 2),
+             "share_between_days": round(float(day_mean.var(ddof=0) / rel.var(ddof=0)), 3),
+             "fold_mean_pct": [round(float(m), 2) for m in rel.groupby(h["fold"]).mean()],
+             "mape_fold_level_oracle": with_level(fold_mean),
+             "mape_day_level_oracle": with_level(day_mean),
+             "n_days": int(h["day"].nunique())}
+    assoc = {n: association(h, t, n) for n in VARIABLES}
+    scr = {n: screen(r, n) for n, (_, _, diag) in VARIABLES.items() if not diag}
+    return {"physics_part": base, "variance": split, "association": assoc, "screen": scr}
+
+
+def write(out: Path, res: dict, notes: list[str]) -> None:
+    b, s = res["physics_part"], res["variance"]
+    lines = ["# Residual analysis: what in M1's trips explains the physics part's held-out "
+             "error", "",
+             "Generated by `python evaluation/residual_learners/residual_analysis.py` from a "
+             "cache of `gate_capture.py --only M1` (`HybridModel` defaults, 3 outer folds "
+             "grouped by date); do not edit by hand, except the *Findings* written from "
+             "these numbers. Methods: the script's docstring.", "",
+             f"Physics part, held-out MAPE: pooled {b['pooled']:.2f} %, per fold "
+             + ", ".join(f"{x:.2f}" for x in b["by_fold"]) + " %.", "",
+             "## Where the error lies: between days or within them", "",
+             f"Held-out relative residual (%): variance {s['var_total']:.2f}, of which "
+             f"{s['var_between_days']:.2f} ({100 * s['share_between_days']:.0f} %) is between "
+             f"the {s['n_days']} days' means. Mean residual per held-out fold: "
+             + ", ".join(f"{x:+.2f}" for x in s["fold_mean_pct"]) + " %. MAPE if each "
+             f"fold's mean were known: {s['mape_fold_level_oracle']:.2f} %; if each day's "
+             f"mean were known: {s['mape_day_level_oracle']:.2f} %.", ""]
+    if notes:
+        lines += ["## Findings", "", *notes, ""]
+    lines += ["## Association of the held-out residual with each variable", "",
+              "Slope in residual points per unit, standard error clustered by day; r within "
+              "and between days; *r OOF* on the training out-of-fold residuals. "
+              "*diag.*: measured from the battery during the trip (explains, cannot be an "
+              "input).", "",
+              "| variable | unit | n | r | slope (se) | t | r within days | r between days "
+              "| r OOF |", "|---|---|---|---|---|---|---|---|---|"]
+    for n, a in res["association"].items():
+        desc, unit, diag = VARIABLES[n]
+        lines.append(f"| {n}{' (diag.)' if diag else ''}: {desc} | {unit} | {a['n']} | "
+                     f"{a['r']:+.2f} | {a['slope_pct']:+.3g} ({a['se_pct']:.2g}) | "
+                     f"{a['t']:+.1f} | {a['r_within']:+.2f} | {a['r_between']:+.2f} | "
+                     f"{a['r_oof']:+.2f} |")
+    lines += ["", "## Cross-fitted screen: one-variable slope correction", "",
+              "Held-out MAPE (%) of the physics corrected by a slope fitted on each outer "
+              "fold's training OOF residuals; the fold's level shift (points) the slope "
+              "predicts, against the actual mean residual per fold ("
+              + ", ".join(f"{x:+.2f}" for x in s["fold_mean_pct"]) + ").", "",
+              "| variable | pooled | fold 0 | fold 1 | fold 2 | every fold <= physics "
+              "| predicted level shift per fold |", "|---|---|---|---|---|---|---|",
+              f"| (physics part) | {b['pooled']:.2f} | "
+              + " | ".join(f"{x:.2f}" for x in b["by_fold"]) + " | | |"]
+    for n, c in sorted(res["screen"].items(), key=lambda kv: kv[1]["pooled"]):
+        ok = all(x <= y + 1e-9 for x, y in zip(c["by_fold"], b["by_fold"], strict=True))
+        lines.append(f"| {n} | {c['pooled']:.2f} | "
+                     + " | ".join(f"{x:.2f}" for x in c["by_fold"])
+                     + f" | {'ok' if ok else 'no'} | "
+                     + ", ".join(f"{x:+.2f}" for x in c["predicted_level_shift_pct"]) + " |")
+    tmp = out / "RESIDUAL_ANALYSIS.md.tmp"
+    tmp.write_text("\n".join(lines) + "\n")
+    tmp.replace(out / "RESIDUAL_ANALYSIS.md")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridev_gate_cache"))
+    ap.add_argument("--data", type=Path, default=rl.rw.DEFAULT_DATA)
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--notes", type=Path, default=None,
+                    help="a text file of findings (bullets) to put in the .md")
+    args = ap.parse_args(argv)
+    if not (args.data / "trips.csv").is_file() or not (args.cache / "M1_fold0.npz").is_file():
+        print(f"note: M1 data ({args.data}) or its cache ({args.cache}) absent; skipped")
+        return 0
+    res = analyse(args.cache, args.data)
+    notes = args.notes.read_text().splitlines() if args.notes else []
+    args.out.mkdir(parents=True, exist_ok=True)
+    tmp = args.out / "residual_analysis.json.tmp"
+    tmp.write_text(json.dumps(res, indent=1) + "\n")
+    tmp.replace(args.out / "residual_analysis.json")
+    write(args.out, res, notes)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
