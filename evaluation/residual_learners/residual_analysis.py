@@ -64,14 +64,29 @@ VARIABLES = {
     "stops_per_km": ("stops (from >= 5 km/h to < 1 km/h) per km", "1/km", False),
     "speed_cv": ("speed sd / mean while moving", "", False),
     "grade_net_pct": ("net elevation change / distance", "%", False),
-    "climb_m_per_km": ("elevation gain / distance", "m/km", False),
+    "climb_m_per_km": ("elevation gain / distance (table: 2 m dead-band)", "m/km", False),
+    "climb_trace_m_per_km": ("climb of the physics' smoothed grades / distance", "m/km", False),
     "aux_standstill_kw": ("battery power at standstill (auxiliaries, HVAC)", "kW", True),
     "regen_ratio": ("regenerated / discharged energy", "", True),
     "voltage_drop_v_per_kwh": ("(start - end voltage) / net energy", "V/kWh", True),
+    "vi_vs_counter": ("V*I energy vs the car's counter, relative (metering)", "", True),
 }
 
 
-def trip_variables(data: Path, labels: pd.Index, trips: pd.DataFrame) -> pd.DataFrame:
+def trace_climb_m(traces) -> pd.Series:
+    """Climb (m) per trip of the grades the physics uses (despiked, smoothed), by trip_id."""
+    off, t = np.asarray(traces.offsets), np.asarray(traces.t_s, float)
+    dh = np.sin(np.asarray(traces.grade_rad, float)) * np.asarray(traces.speed_mps, float)
+    out = []
+    for i in range(len(off) - 1):
+        s = slice(off[i], off[i + 1])
+        h = dh[s] * np.diff(t[s], append=t[s][-1])
+        out.append(float(h[h > 0].sum()))
+    return pd.Series(out, index=np.asarray(traces.trip_id).astype(str))
+
+
+def trip_variables(data: Path, labels: pd.Index, trips: pd.DataFrame,
+                   climb_m: pd.Series) -> pd.DataFrame:
     """One row per cached trip label with the candidate variables."""
     src = pd.read_csv(data / "trips.csv").set_index("trip_id")
     src.index = src.index.astype(str)
@@ -113,10 +128,12 @@ def trip_variables(data: Path, labels: pd.Index, trips: pd.DataFrame) -> pd.Data
         "speed_cv": trace["speed_cv"],
         "grade_net_pct": 0.1 * s["elev_net_m"] / s["distance_km"],
         "climb_m_per_km": s["elev_gain_m"] / s["distance_km"],
+        "climb_trace_m_per_km": climb_m.loc[ids].to_numpy() / s["distance_km"],
         "aux_standstill_kw": s["p_batt_standstill_mean_kw"],
         "regen_ratio": s["e_batt_regen_kwh"] / s["e_batt_discharge_kwh"],
         "voltage_drop_v_per_kwh": (s["batt_voltage_start_v"] - s["batt_voltage_end_v"])
-        / s["e_batt_net_kwh"]}, index=labels)
+        / s["e_batt_net_kwh"],
+        "vi_vs_counter": s["vi_vs_counter_rel_diff"]}, index=labels)
     return out
 
 
@@ -190,10 +207,67 @@ def screen(r: pd.DataFrame, name: str) -> dict:
             "by_fold": per_fold, "predicted_level_shift_pct": shift}
 
 
+def day_variance_ratio(rel: pd.Series, day: pd.Series) -> float:
+    """``sigma_within^2 / sigma_day^2`` of a one-way random-effects split (moments)."""
+    g = rel.groupby(day)
+    n_i = g.size().to_numpy(float)
+    within = float(((rel - g.transform("mean")) ** 2).sum() / (n_i.sum() - n_i.size))
+    n0 = (n_i.sum() - (n_i ** 2).sum() / n_i.sum()) / (n_i.size - 1)
+    between = float((n_i * (g.mean() - rel.mean()) ** 2).sum() / (n_i.size - 1))
+    day_var = max((between - within) / n0, 1e-12)
+    return within / day_var
+
+
+def same_day_update(r: pd.DataFrame, start: pd.Series) -> dict:
+    """Held-out MAPE when each trip's physics is shifted by the shrunken mean residual of
+    the earlier trips of its day (their measured energy known by then): another protocol.
+    The shrinkage ``k`` (``sum / (n + k)``) is the training OOF residuals' variance ratio,
+    per outer fold; ``k = 0`` is the plain mean."""
+    out = {}
+    for label, fixed in (("shrunk", None), ("plain mean", 0.0)):
+        ys, ps, folds, ks = [], [], [], []
+        for k in sorted(r["fold"].unique()):
+            t = r[(r["fold"] == k) & (r["kind"] == "training OOF")]
+            kk = day_variance_ratio(t["rel"], t["day"]) if fixed is None else fixed
+            ks.append(round(kk, 2))
+            te = r[(r["fold"] == k) & (r["kind"] == "held-out")].copy()
+            te["t0"] = start.loc[te["label"]].to_numpy()
+            te = te.sort_values(["day", "t0", "label"])
+            for _, g in te.groupby("day"):
+                prev = np.r_[0.0, np.cumsum(g["rel"].to_numpy())[:-1]]
+                n = np.arange(len(g), dtype=float)
+                ys.append(g["y"].to_numpy(float))
+                ps.append(g["p"].to_numpy(float) * (1.0 + prev / (n + kk)
+                                                    if kk > 0 else 1.0 + np.where(
+                                                        n > 0, prev / np.maximum(n, 1), 0.0)))
+                folds.append(np.full(len(g), k))
+        y, p, f = np.concatenate(ys), np.concatenate(ps), np.concatenate(folds)
+        out[label] = {"pooled": round(mape(y, p), 2), "k": ks,
+                      "by_fold": [round(mape(y[f == k], p[f == k]), 2) for k in range(3)]}
+    return out
+
+
+def air_conditioning(h: pd.DataFrame) -> dict:
+    """Warm trips (> 26 °C) split by the standstill draw (A/C on: > 0.8 kW)."""
+    w = h[h["temperature_c"] > 26.0]
+    on = w["aux_standstill_kw"] > 0.8
+    return {k: {"n": len(g), "aux_kw_mean": round(float(g["aux_standstill_kw"].mean()), 2),
+                "rel_mean_pct": round(100 * float(g["rel"].mean()), 2),
+                "rel_min_pct": round(100 * float(g["rel"].min()), 2),
+                "rel_max_pct": round(100 * float(g["rel"].max()), 2)}
+            for k, g in (("a/c on", w[on]), ("a/c off", w[~on])) if len(g)}
+
+
 def analyse(cache: Path, data: Path) -> dict:
+    import warnings
+
     trips = pd.read_pickle(cache / "M1_trips.pkl")
     r = residuals(cache)
-    v = trip_variables(data, pd.Index(sorted(r["label"].unique())), trips)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, _, m, _ = next(rl.datasets(data))
+    v = trip_variables(data, pd.Index(sorted(r["label"].unique())), trips,
+                       trace_climb_m(m.traces))
     r = r.join(v, on="label")
     h, t = r[r["kind"] == "held-out"], r[r["kind"] == "training OOF"]
     rel = 100 * h["rel"]
@@ -214,7 +288,9 @@ def analyse(cache: Path, data: Path) -> dict:
              "n_days": int(h["day"].nunique())}
     assoc = {n: association(h, t, n) for n in VARIABLES}
     scr = {n: screen(r, n) for n, (_, _, diag) in VARIABLES.items() if not diag}
-    return {"physics_part": base, "variance": split, "association": assoc, "screen": scr}
+    start = pd.to_datetime(trips["start_time"], errors="coerce")
+    return {"physics_part": base, "variance": split, "association": assoc, "screen": scr,
+            "air_conditioning": air_conditioning(h), "same_day_update": same_day_update(r, start)}
 
 
 def write(out: Path, res: dict, notes: list[str]) -> None:
@@ -264,6 +340,24 @@ def write(out: Path, res: dict, notes: list[str]) -> None:
                      + " | ".join(f"{x:.2f}" for x in c["by_fold"])
                      + f" | {'ok' if ok else 'no'} | "
                      + ", ".join(f"{x:+.2f}" for x in c["predicted_level_shift_pct"]) + " |")
+    lines += ["", "## Air conditioning: warm trips by their standstill draw", "",
+              "| trips > 26 °C | n | standstill draw (kW) | residual mean (min, max) % |",
+              "|---|---|---|---|"]
+    for k, a in res["air_conditioning"].items():
+        lines.append(f"| {k} | {a['n']} | {a['aux_kw_mean']:.2f} | {a['rel_mean_pct']:+.2f} "
+                     f"({a['rel_min_pct']:+.2f}, {a['rel_max_pct']:+.2f}) |")
+    lines += ["", "## Another protocol: the day's level learned from its earlier trips", "",
+              "Held-out MAPE (%) if each trip's physics were shifted by the mean residual of "
+              "the earlier trips of its day (their measured energy known by then), shrunk "
+              "by k (training OOF variance ratio per fold); not the date-grouped protocol "
+              "of the targets.", "",
+              "| update | k per fold | pooled | fold 0 | fold 1 | fold 2 |",
+              "|---|---|---|---|---|---|",
+              f"| none (physics part) | | {b['pooled']:.2f} | "
+              + " | ".join(f"{x:.2f}" for x in b["by_fold"]) + " |"]
+    for k, a in res["same_day_update"].items():
+        lines.append(f"| {k} | {', '.join(f'{x:g}' for x in a['k'])} | {a['pooled']:.2f} | "
+                     + " | ".join(f"{x:.2f}" for x in a["by_fold"]) + " |")
     tmp = out / "RESIDUAL_ANALYSIS.md.tmp"
     tmp.write_text("\n".join(lines) + "\n")
     tmp.replace(out / "RESIDUAL_ANALYSIS.md")
