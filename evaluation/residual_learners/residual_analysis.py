@@ -218,31 +218,57 @@ def day_variance_ratio(rel: pd.Series, day: pd.Series) -> float:
     return within / day_var
 
 
-def same_day_update(r: pd.DataFrame, start: pd.Series) -> dict:
-    """Held-out MAPE when each trip's physics is shifted by the shrunken mean residual of
-    the earlier trips of its day (their measured energy known by then): another protocol.
-    The shrinkage ``k`` (``sum / (n + k)``) is the training OOF residuals' variance ratio,
-    per outer fold; ``k = 0`` is the plain mean."""
+def nnls_held_out(cache: Path, r: pd.DataFrame, trips: pd.DataFrame) -> pd.Series:
+    """Held-out predictions of the NNLS baseline on the physics terms (as
+    ``residual_learners.py``: weights by relative least squares on the training days)."""
+    from scipy.optimize import nnls
+
+    z = np.load(cache / "M1_terms.npz", allow_pickle=True)
+    f, labels = z["f"], z["labels"]
+    keep = np.abs(f).sum(axis=1) > 0
+    y = trips.loc[labels, "energy_kwh"].to_numpy(float)
+    out = pd.Series(np.nan, index=labels)
+    for _, te in r[r["kind"] == "held-out"].groupby("fold"):
+        test = np.isin(labels, te["label"])
+        w, _ = nnls(f[keep][:, ~test].T / y[~test, None], np.ones(int((~test).sum())))
+        out[labels[test]] = f[keep][:, test].T @ w
+    return out
+
+
+def same_day_update(r: pd.DataFrame, start: pd.Series, nnls_p: pd.Series) -> dict:
+    """Held-out MAPE when each trip's prediction is shifted by the shrunken mean relative
+    residual of the earlier trips of its day (their measured energy known by then): another
+    protocol. The shrinkage ``k`` (``sum / (n + k)``) is the physics' training OOF residuals'
+    variance ratio, per outer fold; ``k = 0`` is the plain mean. The NNLS rows apply the
+    same update (same ``k``) to the NNLS baseline."""
     out = {}
-    for label, fixed in (("shrunk", None), ("plain mean", 0.0)):
+    for label, fixed, base in (("physics, shrunk", None, None), ("physics, plain mean", 0.0, None),
+                               ("NNLS, none", -1.0, nnls_p), ("NNLS, shrunk", None, nnls_p)):
         ys, ps, folds, ks = [], [], [], []
         for k in sorted(r["fold"].unique()):
             t = r[(r["fold"] == k) & (r["kind"] == "training OOF")]
             kk = day_variance_ratio(t["rel"], t["day"]) if fixed is None else fixed
             ks.append(round(kk, 2))
             te = r[(r["fold"] == k) & (r["kind"] == "held-out")].copy()
+            if base is not None:
+                te["p"] = base.loc[te["label"]].to_numpy()
+                te["rel"] = (te["y"] - te["p"]) / te["p"]
             te["t0"] = start.loc[te["label"]].to_numpy()
             te = te.sort_values(["day", "t0", "label"])
             for _, g in te.groupby("day"):
                 prev = np.r_[0.0, np.cumsum(g["rel"].to_numpy())[:-1]]
                 n = np.arange(len(g), dtype=float)
+                if kk < 0:  # no update
+                    level = np.zeros(len(g))
+                elif kk > 0:
+                    level = prev / (n + kk)
+                else:
+                    level = np.where(n > 0, prev / np.maximum(n, 1), 0.0)
                 ys.append(g["y"].to_numpy(float))
-                ps.append(g["p"].to_numpy(float) * (1.0 + prev / (n + kk)
-                                                    if kk > 0 else 1.0 + np.where(
-                                                        n > 0, prev / np.maximum(n, 1), 0.0)))
+                ps.append(g["p"].to_numpy(float) * (1.0 + level))
                 folds.append(np.full(len(g), k))
         y, p, f = np.concatenate(ys), np.concatenate(ps), np.concatenate(folds)
-        out[label] = {"pooled": round(mape(y, p), 2), "k": ks,
+        out[label] = {"pooled": round(mape(y, p), 2), "k": ks if kk >= 0 else [],
                       "by_fold": [round(mape(y[f == k], p[f == k]), 2) for k in range(3)]}
     return out
 
@@ -314,7 +340,7 @@ def analyse(cache: Path, data: Path) -> dict:
                  "r_heldout": round(float(np.corrcoef(dr, h["rel"])[0, 1]), 3)}
     return {"physics_part": base, "variance": split, "association": assoc, "screen": scr,
             "regen_limit_30kw": regen_res,
-            "air_conditioning": air_conditioning(h), "same_day_update": same_day_update(r, start)}
+            "air_conditioning": air_conditioning(h), "same_day_update": same_day_update(r, start, nnls_held_out(cache, r, trips))}
 
 
 def main(argv=None) -> int:
