@@ -30,6 +30,16 @@ explain but cannot be model inputs):
    training intercept is the CV+ folds' level, not the deployed physics'), and score
    MAPE per fold; also the shift of each fold's held-out mean that the slope predicts,
    beside the fold's actual mean residual.
+4. **Checks of single sources**: warm trips (> 26 °C) split by their standstill battery
+   draw (A/C on above 0.8 kW); the change of the nominal physics with a 30 kW regen limit
+   instead of the default's, against the residual.
+5. **Another protocol** (not the targets'): each held-out trip's prediction shifted by the
+   shrunken mean residual of the earlier trips of its day (a random day effect's
+   prediction, ``sum / (n + k)``, ``k`` the training OOF variance ratio), for the physics
+   part and for the NNLS baseline on the physics terms (recomputed from the cache's terms).
+
+Findings are written from the numbers by ``residual_analysis_report.py``, with the grade
+window screen of ``grade_window_screen.py`` (``grade_window.json``) when present.
 """
 
 from __future__ import annotations
