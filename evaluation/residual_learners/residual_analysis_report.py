@@ -73,7 +73,11 @@ def findings(res: dict, grade: dict | None) -> list[str]:
             + ", but NNLS on the "
             "same terms gains as much: the gated hybrid's relative gain over NNLS goes "
             f"{100 * (1 - g[w0]['hybrid_gated']['pooled'] / g[w0]['nnls_stats']['pooled']):.1f}"
-            f" -> {100 * (1 - g[wb]['hybrid_gated']['pooled'] / g[wb]['nnls_stats']['pooled']):.1f} %.")
+            f" -> {100 * (1 - g[wb]['hybrid_gated']['pooled'] / g[wb]['nnls_stats']['pooled']):.1f} %"
+            + (". The synthetic hilly study's calibrated physics, MAPE % by window: " + "; ".join(
+                f"{w} m: " + ", ".join(f"{k} {x['mape_calibrated_pct']:.2f}"
+                                       for k, x in r.items())
+                for w, r in grade["hilly"].items()) if grade.get("hilly") else "") + ".")
     out += [
         "* **HVAC use beyond the temperature model is real but not predictable from the "
         "trip.** The only strong association is diagnostic: the standstill battery draw "
