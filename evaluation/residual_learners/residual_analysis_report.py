@@ -16,7 +16,8 @@ def findings(res: dict, grade: dict | None) -> list[str]:
     top = max(pre, key=lambda n: abs(pre[n]["t"]))
     others_big = sum(abs(x["t"]) >= 2 for n, x in pre.items() if n != top)
     small = [n for n, x in pre.items() if abs(x["t"]) < 1]
-    scr = res["screen"]
+    scr = {n: c for n, c in res["screen"].items() if n in VARIABLES}
+    sel = res["screen"]["top3_by_oof_ridge"]
     ok = [n for n, c in scr.items() if all(
         x <= y + 1e-9 for x, y in zip(c["by_fold"], b["by_fold"], strict=True))
         and c["pooled"] < b["pooled"]]
@@ -41,6 +42,14 @@ def findings(res: dict, grade: dict | None) -> list[str]:
         + (f"{len(ok)} variable(s) ({', '.join(ok)}) improve every fold."
            if ok else "none improves every fold: any gain is one fold's level.")
         + " |t| < 1 (no association): " + ", ".join(f"`{n}`" for n in small) + ".",
+        "* **A learner on the evidence does not earn its place.** A ridge line on the 3 "
+        "variables with the largest |r| on each fold's training OOF residuals (penalty by "
+        "day-grouped CV there; chosen per fold: " + "; ".join(
+            ", ".join(c["variables"]) + f" (lambda {c['lambda']:g})"
+            for c in sel["chosen"]) + f") scores {sel['pooled']:.2f} % (folds "
+        + ", ".join(f"{x:.2f}" for x in sel["by_fold"]) + f"; physics part {b['pooled']:.2f} %, "
+        f"worse on {sum(x > y for x, y in zip(sel['by_fold'], b['by_fold'], strict=True))} "
+        "fold(s)): the variables change from fold to fold.",
         f"* **State of charge: no evidence on M1.** The pack voltage at the start (the only "
         f"SoC proxy; the source has no SoC) has r {v['r']:+.2f}, t {v['t']:+.1f}, r within "
         f"days {v['r_within']:+.2f}, training OOF r {v['r_oof']:+.2f}. An SoC-dependent "
