@@ -227,7 +227,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     ``planned`` (a :class:`~hybridev.learning.planned.PlannedTripCalibrator`) only when
     most training trips had a logged trace (``domain_.needs_trace``): the trips the
     conformal step scored (CV+: the held-out trips of every fitted fold, by the fold
-    model that did not see their day;
+    model that did not see their day, put on the final model's footing by
+    :func:`~hybridev.learning.trace_gap.fold_gap_factors`;
     split: the held-out trips by the final model) are predicted again *without* their
     traces, against their measured energy (CV+: net of the fold models' extra variance,
     :func:`~hybridev.learning.cvplus.fold_variance`) (and, when the traces log elevation, again
