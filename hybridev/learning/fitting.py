@@ -42,7 +42,12 @@ from hybridev.learning.pipeline import raw_distributions
 from hybridev.learning.planned import PlannedTripCalibrator, conditions_of, net_grade_pct
 from hybridev.learning.shift import MIN_SHIFTED_TRIPS, GapRate, band_scores, fold_gaps
 from hybridev.learning.splits import group_codes, group_holdout
-from hybridev.learning.trace_gap import fit_trace_gap, logged_elevation_m, logged_energy_kwh
+from hybridev.learning.trace_gap import (
+    fit_trace_gap,
+    fold_gap_factors,
+    logged_elevation_m,
+    logged_energy_kwh,
+)
 
 __all__ = ["FitSplit", "elapsed", "fit_calibrator", "fit_gate", "fit_inputs", "fit_learner",
            "fit_physics", "fit_planned", "fit_summary", "held_band_scores", "split_trips"]
@@ -222,7 +227,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     ``planned`` (a :class:`~hybridev.learning.planned.PlannedTripCalibrator`) only when
     most training trips had a logged trace (``domain_.needs_trace``): the trips the
     conformal step scored (CV+: the held-out trips of every fitted fold, by the fold
-    model that did not see their day;
+    model that did not see their day, put on the final model's footing by
+    :func:`~hybridev.learning.trace_gap.fold_gap_factors`;
     split: the held-out trips by the final model) are predicted again *without* their
     traces, against their measured energy (CV+: net of the fold models' extra variance,
     :func:`~hybridev.learning.cvplus.fold_variance`) (and, when the traces log elevation, again
@@ -257,21 +263,24 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
         gaps[0], interp[0] = np.r_[gaps[0], np.zeros(len(s_b))], np.r_[interp[0], h_b]
     planned = None
     if traces is not None and domain.needs_trace:
-        def scored(trips):  # the scored trips predicted from their summaries
+        def scored(trips, elevation):  # the scored trips predicted from their summaries
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # OutOfDomainWarning of the scored trips
-                if cv:
-                    dists = raw_distributions(model, trips.iloc[idx], None, seed=int(seed),
-                                              nets=cv, physics=cal.fold_physics_ or None)[0]
-                    rows, means = np.arange(len(idx)), np.stack([d.mean() for d in dists])
+                if cv:  # the fold models' on the final model's footing (fold_gap_factors)
+                    dists = raw_distributions(model, trips, None, seed=int(seed), nets=nets,
+                                              physics=phys)[0]
+                    means = np.stack([d.mean() for d in dists])
+                    f = fold_gap_factors(trips["avg_speed_kmh"].to_numpy(float), traced,
+                                         means, fold, elevation)[:, idx]
+                    rows, means = np.arange(len(idx)), means[1:, idx] * f
                     return (means[fold[idx], rows],
-                            np.stack([d.std() for d in dists])[fold[idx], rows],
+                            (np.stack([d.std() for d in dists[1:]])[:, idx] * f)[fold[idx], rows],
                             fold_variance(means, len(np.unique(split.codes[idx]))))
                 dist = raw_distributions(model, trips.iloc[idx], None, seed=int(seed))[0][0]
                 return dist.mean(), dist.std(), np.zeros(len(idx))
 
         def calibrator(trips, elevation=None):
-            mu, sd, v = scored(trips)
+            mu, sd, v = scored(trips, elevation)
             # the trace gap never sees the measured energy: the scores use the final one
             gap = fit_trace_gap(model, trips, traces, elevation, e_log=e_log)
             factor = gap.factor(trips["avg_speed_kmh"].to_numpy(float), elevation)
@@ -284,6 +293,13 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))
         e_log = logged_energy_kwh(model, good, traces)  # the same for both calibrations
+        if cv:  # the final and the fold models with the logged traces (fold_gap_factors)
+            nets = [None, *cv]
+            phys = [None, *cal.fold_physics_] if cal.fold_physics_ else None
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                traced = np.stack([d.mean() for d in raw_distributions(
+                    model, good, traces, seed=int(seed), nets=nets, physics=phys)[0]])
         planned = calibrator(good)
         grade = None if "grade_pct" in good.columns else net_grade_pct(good, traces)
         if grade is not None:  # planned trips given a grade: scored with the logged one

@@ -16,7 +16,15 @@ its own scores, learned at fit on the training trips themselves:
 
 Before scoring, each summary-only prediction is scaled by the learned trace gap
 (:mod:`hybridev.learning.trace_gap`, ``trace_gap_``: how this car's logged traces
-differ in physics from synthesised ones, by mean speed and climb/descent).
+differ in physics from synthesised ones, by mean speed and climb/descent). A CV+
+fold model's summary-only predictions are first put on the final model's footing
+(:func:`~hybridev.learning.trace_gap.fold_gap_factors`: its own ratio of traced to
+summary-only prediction, learned on its training trips, over the final model's
+there): a fold model fitted on fewer days relates a summary to a trace differently
+(its own physics and ensemble), and that offset is not an error the final model
+makes. Without it, on M1 at 40 training trips (6-10 days) the scores held day offsets
+of up to 20 % and the planned intervals came out 1.44 times as wide as the errors
+needed (``evaluation/planned_trips``).
 A synthesised trace is smoother than how a given car is driven, so summary-only
 predictions may be biased by conditions: a multiplicative correction
 ``exp(b0 + b1 ln v + b2 T / 10)`` (``v`` km/h, ``T`` °C) is ridge-fitted to the

@@ -13,7 +13,12 @@ from hybridev.core.errors import OutOfDomainWarning
 from hybridev.data.timeseries import as_traces
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.planned import PlannedTripCalibrator
-from hybridev.learning.trace_gap import TraceGap, elevation_of, logged_elevation_m
+from hybridev.learning.trace_gap import (
+    TraceGap,
+    elevation_of,
+    fold_gap_factors,
+    logged_elevation_m,
+)
 
 CAR = VehicleParams.from_coastdown(150.0, 0.45, 0.028, mass_kg=1750.0)
 
@@ -30,6 +35,35 @@ def test_fit_recovers_a_speed_law_and_does_not_extrapolate():
     np.testing.assert_allclose(gap.factor(np.array([5.0, 200.0])),
                                gap.factor(np.array([v.min(), v.max()])))
     assert np.all(np.log(gap.factor(np.linspace(1, 300, 50))) <= r.max() + 1e-12)
+
+
+def test_fold_gap_factors_put_each_fold_model_on_the_final_models_footing():
+    """Fold models whose summary-only means sit off their traced ones by a speed law the
+    final model does not have: the factor undoes each fold's own law (learned on its
+    training trips only), leaves a fold like the final model at 1, and never uses the
+    fold's held-out trips."""
+    rng = np.random.default_rng(3)
+    n = 60
+    v = rng.uniform(15.0, 90.0, n)
+    fold = np.arange(n) % 3
+    traced = np.vstack([rng.uniform(2.0, 9.0, n)] * 4) * rng.uniform(0.97, 1.03, (4, n))
+    law = np.vstack([np.ones(n), np.exp(0.3 - 0.08 * np.log(v)), np.full(n, 1.12),
+                     np.ones(n)])  # final, fold 0 (speed law), fold 1 (10 % high), fold 2
+    planned = traced * 0.9 * law  # the final model's own ratio (0.9) is shared by all
+    f = fold_gap_factors(v, traced, planned, fold)
+    assert f.shape == (3, n)
+    for j in range(3):  # every fold now relates summary to trace as the final model does
+        np.testing.assert_allclose(np.log(planned[1 + j] * f[j] / traced[1 + j]),
+                                   np.log(planned[0] / traced[0]), atol=0.04)
+    assert np.all(np.abs(f[2] - 1.0) < 0.03)
+    # the held-out trips of fold 1 do not enter its factor
+    odd = planned.copy()
+    odd[2, fold == 1] *= 3.0
+    np.testing.assert_allclose(fold_gap_factors(v, traced, odd, fold)[1], f[1])
+    # with the climb and descent per km, as the calibration given a grade
+    elev = np.column_stack([rng.uniform(0, 30, n), rng.uniform(0, 30, n)])
+    fe = fold_gap_factors(v, traced, planned, fold, elev)
+    np.testing.assert_allclose(fe[1], 1 / 1.12, rtol=0.03)
 
 
 def test_elevation_terms_are_used_only_when_given():
