@@ -26,8 +26,11 @@ pack) is multiplied by ``1 + f`` with
   voltage curve matter;
 * ``V(s)`` the cell's open-circuit voltage (:func:`cell_ocv_v`), ``V_nom``
   :data:`CELL_NOMINAL_V`; ``r(s)`` the resistance relative to mid charge
-  (:func:`relative_resistance`); ``A(T)`` Arrhenius in the ambient temperature
-  (:data:`ACTIVATION_ENERGY_J_MOL`): the pack starts a trip at ambient.
+  (:func:`relative_resistance`); ``A(T)`` Arrhenius (:data:`ACTIVATION_ENERGY_J_MOL`)
+  in the pack's temperature, taken as the ambient one but not below
+  ``VehicleParams.battery_heat_below_c``: a pack warms with its own loss while
+  driving, and the battery management heats a cold one (the mid-trip SoC is
+  held at :data:`MIN_MID_SOC` or above).
 
 ``f`` is zero at the reference SoC at every temperature, so the cold
 factors of the continuous climate model (:mod:`hybridev.physics.thermal`)
@@ -83,6 +86,11 @@ LOW_SOC_KNEE = 0.3
 EMPTY_RESISTANCE_RATIO = 1.6
 """Resistance at SoC 0 over mid charge (INR21700-50S: 22.8 / 14.2 mOhm)."""
 
+MIN_MID_SOC = 0.05
+"""Floor of the mid-trip SoC: below about 5 % the cell's voltage falls to its 2.5 V
+cut-off within a few per cent of charge, a region the car's reserve below its displayed
+0 % keeps it out of (a trip whose mid-point lies lower ends empty)."""
+
 _STOICH = ((0.0279, 0.9014), (0.9084, 0.2661))
 """(negative x, positive y) at SoC 0 and 1: Chen et al. (2020)."""
 
@@ -125,10 +133,10 @@ def relative_resistance(soc) -> np.ndarray:
     return 1.0 + (EMPTY_RESISTANCE_RATIO - 1.0) * np.clip(1.0 - s / LOW_SOC_KNEE, 0.0, 1.0)
 
 
-def _loss_per_watt(soc, temperature_c) -> np.ndarray:
+def _loss_per_watt(soc, pack_c) -> np.ndarray:
     """``r(s) A(T) / V(s)^2`` in 1/V^2 (times ``rq V_nom / E_pack`` it is per W of power)."""
     arr = np.exp(ACTIVATION_ENERGY_J_MOL / _R_GAS
-                 * (1.0 / (np.asarray(temperature_c, dtype=float) + 273.15) - 1.0 / 298.15))
+                 * (1.0 / (np.asarray(pack_c, dtype=float) + 273.15) - 1.0 / 298.15))
     return relative_resistance(soc) * arr / cell_ocv_v(soc) ** 2
 
 
@@ -169,10 +177,11 @@ def battery_loss_fraction(vehicle: VehicleParams, temperature_c, soc, energy_kwh
     s = np.asarray(soc, dtype=float)
     known = np.isfinite(s)
     cap = vehicle.battery_capacity_kwh
-    s_mid = np.clip(np.where(known, s, REFERENCE_SOC) - 0.5 * e / cap, 0.0, 1.0)
+    s_mid = np.clip(np.where(known, s, REFERENCE_SOC) - 0.5 * e / cap, MIN_MID_SOC, 1.0)
     power_w = e * 3.6e6 / np.asarray(duration_s, dtype=float)
     per_w = rq * CELL_NOMINAL_V / (cap * 1e3)
-    d = _loss_per_watt(s_mid, temperature_c) - _loss_per_watt(REFERENCE_SOC, temperature_c)
+    pack_c = np.maximum(np.asarray(temperature_c, dtype=float), vehicle.battery_heat_below_c)
+    d = _loss_per_watt(s_mid, pack_c) - _loss_per_watt(REFERENCE_SOC, pack_c)
     return np.broadcast_to(np.where(known, power_w * per_w * d, 0.0), shape).copy()
 
 
