@@ -111,3 +111,14 @@ def test_logged_statistics_carry_the_loss():
     assert s_on.battery_factor[0] > 1.0 and s_off.battery_factor[0] == 1.0
     assert energy_from_stats(s_on)[0] == pytest.approx(
         float(with_battery_loss(CAR, energy_from_stats(s_off), 0.0, 0.2, n - 1.0)[0]), rel=1e-12)
+
+
+def test_vehicles_saved_before_the_field_load_without_the_loss():
+    """Model files store the vehicle as a dict; one written before the field existed
+    loads with no battery loss, so its predictions stay as they were."""
+    d = dataclasses.asdict(CAR)
+    d.pop("cell_resistance_ohm_ah")
+    old = VehicleParams(**d)
+    assert old.cell_resistance_ohm_ah == 0.0
+    t = _trips()
+    assert np.array_equal(simulate(t, old).energy_kwh_physics, simulate(t, OFF).energy_kwh_physics)
