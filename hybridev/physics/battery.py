@@ -27,10 +27,10 @@ pack) is multiplied by ``1 + f`` with
 * ``V(s)`` the cell's open-circuit voltage (:func:`cell_ocv_v`), ``V_nom``
   :data:`CELL_NOMINAL_V`; ``r(s)`` the resistance relative to mid charge
   (:func:`relative_resistance`); ``A(T)`` Arrhenius (:data:`ACTIVATION_ENERGY_J_MOL`)
-  in the pack's temperature, taken as the ambient one but not below
-  ``VehicleParams.battery_heat_below_c``: a pack warms with its own loss while
-  driving, and the battery management heats a cold one (the mid-trip SoC is
-  held at :data:`MIN_MID_SOC` or above).
+  in the pack's temperature: the ambient one (a parked pack soaks to it), and for
+  a car with a battery heater (``battery_warmup_kwh_per_k > 0``) not below
+  ``battery_heat_below_c``, where the heater holds it. The mid-trip SoC is held
+  at :data:`MIN_MID_SOC` or above.
 
 ``f`` is zero at the reference SoC at every temperature, so the cold
 factors of the continuous climate model (:mod:`hybridev.physics.thermal`)
@@ -180,7 +180,9 @@ def battery_loss_fraction(vehicle: VehicleParams, temperature_c, soc, energy_kwh
     s_mid = np.clip(np.where(known, s, REFERENCE_SOC) - 0.5 * e / cap, MIN_MID_SOC, 1.0)
     power_w = e * 3.6e6 / np.asarray(duration_s, dtype=float)
     per_w = rq * CELL_NOMINAL_V / (cap * 1e3)
-    pack_c = np.maximum(np.asarray(temperature_c, dtype=float), vehicle.battery_heat_below_c)
+    pack_c = np.asarray(temperature_c, dtype=float)
+    if vehicle.battery_warmup_kwh_per_k > 0:  # the battery heater holds the pack there
+        pack_c = np.maximum(pack_c, vehicle.battery_heat_below_c)
     d = _loss_per_watt(s_mid, pack_c) - _loss_per_watt(REFERENCE_SOC, pack_c)
     return np.broadcast_to(np.where(known, power_w * per_w * d, 0.0), shape).copy()
 
