@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybridev.physics.battery import with_battery_loss
 from hybridev.physics.climate import _profile_values, hvac_power_kw
 from hybridev.physics.derate import regen_derate_factor, soc_drop_estimate
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
@@ -321,6 +322,11 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     out += aux
     if veh.drive_loss_kw:
         out += veh.drive_loss_kw * ((v[..., 1:] + v[..., :-1]) > 2.0 * MOVING_MPS)
+    if soc is not None and veh.cell_resistance_ohm_ah:  # the trip's factor on every interval
+        e = out.sum(axis=-1) * (np.asarray(dt, dtype=float)[..., 0] if np.ndim(dt) else dt) / 3600.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where(e != 0, _trip_loss(veh, e, temperature_c, soc, v, dt) / e, 1.0)
+        out *= np.asarray(k)[..., None]
     return out
 
 
@@ -365,7 +371,24 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux, cap)
     if veh.drive_loss_kw:
         e = e + (veh.drive_loss_kw * _moving_steps(v) * (dt / 3600.0))[..., 0]
-    return e
+    return _trip_loss(veh, e, temperature_c, soc, v, dt)
+
+
+def _trip_loss(veh: VehicleParams, e, temperature_c, soc, v: np.ndarray, dt):
+    """``e`` (per trip) with the pack's resistance at the trip's SoC (physics.battery)."""
+    if soc is None or not veh.cell_resistance_ohm_ah:
+        return e
+    s = np.asarray(_per_trip(soc, v, "soc"), dtype=float)
+    if np.any(np.isfinite(s) & ((s < 0) | (s > 1))):
+        raise ValueError(f"soc={soc!r} is outside the allowed range [0, 1] (NaN: unknown)")
+    shp = np.shape(e)
+
+    def per_trip(x):  # a scalar or (n_trips, 1) column as the shape of e
+        x = np.asarray(x, dtype=float)
+        return np.broadcast_to(x.reshape(-1) if x.ndim else x, shp)
+
+    return with_battery_loss(veh, e, per_trip(_per_trip(temperature_c, v, "temperature_c")),
+                             per_trip(s), per_trip(dt * (v.shape[-1] - 1)))
 
 
 def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | None = None,

@@ -233,6 +233,13 @@ class VehicleParams:
         a car leaving at SoC 1.0 regains its regen as the pack drains below the
         threshold, as the owners' reports describe. Only when the start SoC is
         known, and only for a finite ``regen_max_kw``.
+    cell_resistance_ohm_ah : float
+        A cell's DC resistance times its capacity, Ohm Ah: sets the battery's
+        internal-resistance loss, which grows as the SoC (and the pack's
+        voltage) falls; ``drivetrain_efficiency`` holds it at SoC 0.5 and
+        :mod:`hybridev.physics.battery` adds how it moves with the trip's
+        SoC, power and temperature. 0 in the paper's model (no such term);
+        :data:`COMPACT_BEV_CELL_RESISTANCE_OHM_AH` from :meth:`from_coastdown`.
     road_load_source : {"datasheet", "coastdown"}
         Where ``C_r``, ``C_dA`` and ``b`` come from. ``"coastdown"`` (set by
         :meth:`from_coastdown`) makes the calibration's priors on them tight
@@ -286,6 +293,7 @@ class VehicleParams:
     cold_soak_time_constant_s: float = 3600.0
     regen_max_kw: float | None = None
     regen_derate_soc: float = 0.9
+    cell_resistance_ohm_ah: float = 0.0
     road_load_source: str = "datasheet"
     source: str = field(
         default="Paper, Sec. II-C: vehicle table (EPA/manufacturer-based) and P_b, P_c(T)",
@@ -308,6 +316,7 @@ class VehicleParams:
         if self.regen_max_kw is not None:
             _check_range(o, "regen_max_kw", self.regen_max_kw, 0.0, 1000.0, lo_open=True)
         _check_range(o, "regen_derate_soc", self.regen_derate_soc, 0.0, 1.0, hi_open=True)
+        _check_range(o, "cell_resistance_ohm_ah", self.cell_resistance_ohm_ah, 0.0, 10.0)
         for name, allowed in (("climate_model", CLIMATE_MODELS), ("heater_kind", HEATER_KINDS),
                               ("road_load_source", ("datasheet", "coastdown"))):
             if getattr(self, name) not in allowed:
@@ -426,6 +435,7 @@ class VehicleParams:
         kwargs.setdefault("aux_base_kw", COMPACT_BEV_AUX_KW)
         kwargs.setdefault("drive_loss_kw", COMPACT_BEV_DRIVE_LOSS_KW)
         kwargs.setdefault("regen_max_kw", COMPACT_BEV_REGEN_MAX_KW)
+        kwargs.setdefault("cell_resistance_ohm_ah", COMPACT_BEV_CELL_RESISTANCE_OHM_AH)
         return cls(
             mass_kg=float(mass_kg),
             rolling_resistance_coef=float(a_n) / (float(mass_kg) * gravity_mps2),
@@ -483,3 +493,11 @@ https://www.ownerinfo.jaguar.com/document/4K/2019/T32090/29962_en_GBR/proc/G2174
 Polestar 2 manual, "Power meter": "regeneration to the battery is limited"),
 which :class:`VehicleParams` models with ``regen_derate_soc`` and the cold
 regen factor. Set ``regen_max_kw`` from the car's data sheet if it says."""
+
+
+COMPACT_BEV_CELL_RESISTANCE_OHM_AH = 0.071
+"""A cell's DC resistance times its capacity, Ohm Ah, for the SoC-dependent battery loss
+(:mod:`hybridev.physics.battery`): 14.2 mOhm x 5.0 Ah of a Samsung INR21700-50S between
+40 % and 60 % of discharge (10 A, 20 s pulses; tayvoy.com, "Samsung INR21700-50S"). A
+cell-level figure: a pack's busbars and contactors add to it, so the loss is a lower
+bound and the residual learner holds the rest."""

@@ -158,6 +158,11 @@ class PhysicsStats:
         without a limit.
     regen_capped_h : numpy.ndarray, shape (n_rows,), h, optional
         Time spent braking at the regen limit (at the reference vehicle).
+    battery_factor : numpy.ndarray, shape (n_rows,), optional
+        ``1 + f``, the share of the pack's resistance at the trip's SoC
+        (:mod:`hybridev.physics.battery`), fixed at ``vehicle``; it multiplies
+        every energy term. 1 without a start SoC or the vehicle's
+        ``cell_resistance_ohm_ah``.
     """
 
     roll_pos: np.ndarray
@@ -185,12 +190,15 @@ class PhysicsStats:
     warmup_offset_dkwh: np.ndarray | None = None
     regen_capped_kwh: np.ndarray | None = None
     regen_capped_h: np.ndarray | None = None
+    battery_factor: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("warmup_kwh", "cooling_kw", "moving_h", "regen_capped_kwh",
                      "regen_capped_h"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(len(self.trip)))
+        if self.battery_factor is None:
+            object.__setattr__(self, "battery_factor", np.ones(len(self.trip)))
 
     @property
     def n_rows(self) -> int:
@@ -215,7 +223,7 @@ class PhysicsStats:
             self.eta_r * self.lin_neg, self.eta_r * self.rest_neg, self.duration_h,
             (self.hvac_kw - self.cooling_kw) * self.duration_h, self.mode_kw * self.duration_h,
             self.warmup_kwh, self.cooling_kw * self.duration_h, self.moving_h,
-            -self.regen_capped_kwh])
+            -self.regen_capped_kwh]) * self.battery_factor
 
     def take(self, trip_positions) -> PhysicsStats:
         """Statistics of a subset of trips, renumbered in the given (increasing) order."""
@@ -363,7 +371,7 @@ def row_energy(stats: PhysicsStats, params=None, term_weights=None) -> np.ndarra
         e = sum(c * f for c, f in zip(coef, stats.features(), strict=True))
     moved = offset_deltas(stats, p["heating_offset_k"])
     if moved is not None:
-        e = e + coef[HEATING_TERM] * moved[0] + coef[WARMUP_TERM] * moved[1]
+        e = e + (coef[HEATING_TERM] * moved[0] + coef[WARMUP_TERM] * moved[1]) * stats.battery_factor
     return e
 
 
@@ -397,8 +405,8 @@ def term_energies(stats: PhysicsStats, params=None) -> np.ndarray:
     f = stats.features()
     moved = offset_deltas(stats, float(np.asarray(p["heating_offset_k"]).reshape(-1)[0]))
     if moved is not None:
-        f[HEATING_TERM] += moved[0]
-        f[WARMUP_TERM] += moved[1]
+        f[HEATING_TERM] += moved[0] * stats.battery_factor
+        f[WARMUP_TERM] += moved[1] * stats.battery_factor
     t = (coef[:, None] * f).T
     if not stats.marginalised:
         return t

@@ -115,7 +115,7 @@ def stats_from_traces(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     return _assemble(sp, sn, dt[:, 0] * (v.shape[1] - 1), t, prof, veh,
                      max_speed_kmh=v.max(axis=1) * 3.6,
                      moving_s=_moving_steps(v)[:, 0] * dt[:, 0], offset_grid=_offset_grid,
-                     regen_cap_kw=cap, capped_s=capped_s, capped_fs=capped_fs)
+                     regen_cap_kw=cap, capped_s=capped_s, capped_fs=capped_fs, soc=soc)
 
 
 def _trace_sums(v: np.ndarray, dt: np.ndarray, th: np.ndarray, veh: VehicleParams,
@@ -324,7 +324,7 @@ def trip_stats(trips: pd.DataFrame, vehicle: VehicleParams | None = None, *,
                     heating_grid_kw=heat_grid,
                     regen_cap_kw=np.full(len(trip), float(regen_limit_kw(veh))),  # as
                     # _regen_threshold's limit, which does not depend on the profiles
-                    capped_s=capped_s, capped_fs=capped_fs)
+                    capped_s=capped_s, capped_fs=capped_fs, soc=soc0[trip])
 
 
 def _synthetic_rows(cols, dest, veh, n_steps, seed, soc, sums, duration, moving, vmax,

@@ -126,7 +126,7 @@ def stats_from_logs(traces: LoggedTraces, *, vehicle: VehicleParams | None = Non
                      moving_s=moving,
                      parked_s=None if parked_s is None else np.broadcast_to(
                          np.asarray(parked_s, float), (n,)), heating_grid_kw=grid,
-                     regen_cap_kw=cap_kw, capped_s=capped_s, capped_fs=capped_fs)
+                     regen_cap_kw=cap_kw, capped_s=capped_s, capped_fs=capped_fs, soc=soc)
 
 
 def _capped_share(pw_kwh, capped, thr, trip, dt, n: int) -> np.ndarray:

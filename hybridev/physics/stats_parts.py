@@ -8,15 +8,23 @@ and :mod:`hybridev.physics.stats_logs` (logged traces); see
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 
+from hybridev.physics.battery import battery_loss_fraction
 from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.derate import derate_line, soc_drop_estimate
 from hybridev.physics.forces import regen_limit_kw
 from hybridev.physics.kinematics import profile_table
 from hybridev.physics.params import VehicleParams
-from hybridev.physics.stats import _J_PER_KWH, _SUMS, HEATING_OFFSET_GRID_K, PhysicsStats
+from hybridev.physics.stats import (
+    _J_PER_KWH,
+    _SUMS,
+    HEATING_OFFSET_GRID_K,
+    PhysicsStats,
+    row_energy,
+)
 from hybridev.physics.thermal import climate_split_kw, cold_factors, warmup_energy_kwh
 
 __all__: list[str] = []  # private helpers only
@@ -86,8 +94,12 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
               log_weight=None, n_trips=None, max_speed_kmh=None, climate_kw=None,
               start_temperature_c=None, cooling_kw=None, moving_s=None,
               parked_s=None, heating_grid_kw=None, offset_grid: bool = True,
-              regen_cap_kw=None, capped_s=None, capped_fs=None) -> PhysicsStats:
+              regen_cap_kw=None, capped_s=None, capped_fs=None, soc=None) -> PhysicsStats:
     """Statistics from the sums; climate terms from the per-row temperature.
+
+    ``soc`` (per row, or None: unknown) sets each row's ``battery_factor``, the pack's
+    resistance at the trip's SoC (:mod:`hybridev.physics.battery`), from the row's
+    energy at ``veh``.
 
     ``regen_cap_kw`` (per row, before the cold factor and the SoC derating),
     ``capped_s`` (time spent at the regen limit) and ``capped_fs`` (that time
@@ -136,7 +148,7 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
             d_warm = wg - wg[:, i0:i0 + 1]
     kw = {f"{k}_pos": sums_pos[i] for i, k in enumerate(_SUMS)}
     kw.update({f"{k}_neg": sums_neg[i] for i, k in enumerate(_SUMS)})
-    return PhysicsStats(
+    stats = PhysicsStats(
         **kw, duration_h=duration_s / 3600.0, hvac_kw=np.array(hvac, dtype=float),
         mode_kw=mode_kw,
         mult=mult, eta_r=eta_r, trip=np.arange(n) if trip is None else trip,
@@ -146,3 +158,8 @@ def _assemble(sums_pos, sums_neg, duration_s, temperature_c, profile, veh, trip=
         moving_h=None if moving_s is None else np.asarray(moving_s, float) / 3600.0,
         heating_offset_dkwh=d_heat, warmup_offset_dkwh=d_warm, regen_capped_kwh=capped,
         regen_capped_h=None if capped_s is None else np.asarray(capped_s, float) / 3600.0)
+    if soc is None or not veh.cell_resistance_ohm_ah:
+        return stats
+    f = battery_loss_fraction(veh, t, np.broadcast_to(np.asarray(soc, dtype=float), (n,)),
+                              row_energy(stats), duration_s)
+    return dataclasses.replace(stats, battery_factor=1.0 + f)

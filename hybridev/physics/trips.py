@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from hybridev.physics.battery import with_battery_loss
 from hybridev.physics.climate import hvac_power_kw
 from hybridev.physics.derate import derate_line, soc_drop_estimate
 from hybridev.physics.forces import (
@@ -237,6 +238,7 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
                          soc_drop_estimate(veh, cols["distance_km"] * 1000.0,
                                            cols["distance_km"] * 3600.0 / cols["avg_speed_kmh"]))
     warm = veh.climate_model == "continuous"
+    dur = np.empty(n)
     for sl, v, dt, grade in _column_blocks(cols, n, n_steps, seed):
         # Same model as trace_energy_kwh, minus the re-validation of our own traces.
         pw = _wheel_power_w(v, dt[:, None], veh, _interval_grade(grade, v))
@@ -251,8 +253,11 @@ def _simulate_columns(trips: pd.DataFrame, vehicle: VehicleParams | None = None,
         if veh.drive_loss_kw:
             energy[sl] += veh.drive_loss_kw * _moving_steps(v)[:, 0] * dt / 3600.0
         vmax[sl] = v.max(axis=1) * 3.6
+        dur[sl] = dt * (v.shape[1] - 1)
         if progress is not None:
             progress(min(sl.stop, n))
+    # the pack's resistance at the trip's SoC (hybridev.physics.battery)
+    energy = with_battery_loss(veh, energy, temp, cols["soc_initial"], dur)
     return t, cols, _physics_columns(energy, vmax, veh.battery_capacity_kwh,
                                     cols["soc_initial"], cols["distance_km"])
 

@@ -15,7 +15,8 @@ from hybridev.physics.thermal import cold_factors
 from hybridev.physics.traces import LoggedTraces
 
 CAR = VehicleParams.from_coastdown(150.0, 0.5, 0.03, 1800.0, heater_kind="ptc",
-                                   regen_max_kw=20.0)
+                                   regen_max_kw=20.0, cell_resistance_ohm_ah=0.0)
+"""The regen limit alone (no SoC-dependent battery loss, tests/physics/test_battery.py)."""
 
 
 def _traces(n=6, n_samples=401, seed=0):
