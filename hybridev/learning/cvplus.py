@@ -66,15 +66,21 @@ from hybridev.learning.features import trip_features
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
-__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
-           "fit_cv_plus", "fold_diagnostics", "fold_variance", "nets_from_arrays",
+__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "FOLD_WARM_TAUS", "MIN_GROUPS", "cv_fold_assignment",
+           "fit_cv_plus", "fold_diagnostics", "fold_variance", "fold_warm_steps", "nets_from_arrays",
            "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
 
 FOLD_WARM_STEPS = 200
-"""emcee steps of a CV+ fold's physics posterior started at the full posterior's draws."""
+"""Fewest emcee steps of a CV+ fold's physics posterior started at the full posterior's draws."""
+
+FOLD_WARM_TAUS = 6.0
+"""A warm fold run lasts this many of the full posterior's autocorrelation times (at
+least :data:`FOLD_WARM_STEPS`); its first half (3 of them, the burn-in rule of
+:func:`hybridev.bayes.posterior.burn_and_thin`) is discarded. When that is longer
+than :data:`FOLD_POSTERIOR_STEPS` the fold starts at its own MAP instead."""
 
 MIN_GROUPS = 5
 """Fewer calibration groups than this warn at fit (coverage of new days is then
@@ -240,16 +246,29 @@ def cv_fold_assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSeque
     return _assignment(codes, cv_folds, ss)[0]
 
 
+def fold_warm_steps(post) -> int | None:
+    """emcee steps of a warm fold run from ``post`` (the full posterior), or None
+    (start at the fold's MAP): ``FOLD_WARM_TAUS`` of ``post``'s autocorrelation time
+    ``tau_max``, at least :data:`FOLD_WARM_STEPS`; None above :data:`FOLD_POSTERIOR_STEPS`
+    or without a finite ``tau_max``."""
+    tau = float(post.diagnostics.get("tau_max", np.nan))
+    if not math.isfinite(tau):
+        return None
+    steps = max(FOLD_WARM_STEPS, math.ceil(FOLD_WARM_TAUS * tau))
+    return steps if steps <= FOLD_POSTERIOR_STEPS else None
+
+
 def _fold_physics(physics, trips, seed: int, traces):
     """A fold's ``(posterior, discrepancy)``: warm start from the full posterior (see module)."""
     post = physics.posterior_
     draws = getattr(post, "sampler_draws_", None)
+    steps = fold_warm_steps(post) if draws is not None else None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        if draws is not None:
+        if steps is not None:
             p0 = warm_start_walkers(draws, int(post.diagnostics["n_walkers"]), seed)
             out = physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
-                                     n_steps=FOLD_WARM_STEPS, init_walkers=p0)
+                                     n_steps=steps, init_walkers=p0)
             if out[0].diagnostics.get("warm_start"):
                 return out
         return physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
