@@ -21,8 +21,15 @@ chain-length warnings are silenced) and sampled with the full posterior's sign
 split, so all folds share one set of statistics at prediction time.
 
 Warm start (issue 34): each fold's walkers start at draws of the full posterior
-(:func:`hybridev.bayes.sampler.warm_start_walkers`) and run
-:data:`FOLD_WARM_STEPS` steps, with no MAP search. Chosen over importance
+(:func:`hybridev.bayes.sampler.warm_start_walkers`) and run :func:`fold_warm_steps`
+steps (:data:`FOLD_WARM_TAUS` of the full posterior's autocorrelation time, at least
+:data:`FOLD_WARM_STEPS`), with no MAP search; the first half is discarded. The full
+posterior has seen the held-out days: a run of a fixed 200 steps was about one of its
+autocorrelation times on M1 at 20 trips (tau 90-330 steps), whose own tau estimate
+(about 18 steps) burnt only some 50 steps, so the fold "posterior" stayed close to
+the full one and the out-of-fold scores were optimistic. When the full posterior
+mixes too slowly for that to fit in :data:`FOLD_POSTERIOR_STEPS` steps, the fold
+starts at its own MAP instead. Chosen over importance
 re-weighting of the full posterior's draws by ``1 / L(held-out trips)``: a fold
 holds out a fifth of the trips and, with the group (day) effect, whole days, so
 the weights are heavy-tailed (the effective sample size of IS leave-a-fifth-out is
@@ -30,9 +37,9 @@ typically a few percent of the draws) and the fallback would run in most folds;
 and the fold's posterior must also be a proper sample for its discrepancy fit.
 Removing a fifth of the trips moves the posterior by a fraction of its spread, so
 walkers drawn from the full posterior are already close to the fold's stationary
-distribution: the run needs no long burn-in, and the first half it discards (the
-burn-in of :meth:`~hybridev.bayes.posterior.PhysicsPosterior.from_sampler`) covers
-the remaining shift. A fold whose posterior has other dimensions than the full
+distribution, and the first half of the run, discarded (``min_burn`` of
+:meth:`~hybridev.bayes.posterior.PhysicsPosterior.from_sampler`), covers the
+remaining shift. A fold whose posterior has other dimensions than the full
 one (its trips are all labelled, so no mode weights to infer) falls back to the
 MAP start with :data:`FOLD_POSTERIOR_STEPS` steps. The per-fold diagnostics
 (start, steps, acceptance, autocorrelation time) are in ``fit_info_["cv_folds"]``
