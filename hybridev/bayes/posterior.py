@@ -196,8 +196,13 @@ class PhysicsPosterior:
     @classmethod
     def from_sampler(cls, sampler, names, *, vehicle, reference_vehicle, prior, map_theta,
                      missing_mode, trace_steps, trace_seed, elapsed_s,
-                     n_group: int = 0, noise_dof: float | None = None) -> PhysicsPosterior:
+                     n_group: int = 0, noise_dof: float | None = None,
+                     min_burn: int = 0) -> PhysicsPosterior:
         """Burn-in (3 tau), thinning (tau/2) and diagnostics of an emcee run; warns if short.
+
+        ``min_burn``: discard at least this many steps (at most half the run), e.g. a
+        warm-started run whose own autocorrelation estimate is too short to trust
+        (:func:`hybridev.bayes.sampler.calibrate_physics` with ``init_walkers``).
 
         With a Student-t likelihood (``noise_dof``) the noise and day-effect
         scales are reported as standard deviations (``x sqrt(nu / (nu - 2))``).
@@ -205,6 +210,7 @@ class PhysicsPosterior:
         n_steps = int(sampler.iteration)
         tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
         tau_max, burn, thin = burn_and_thin(tau, n_steps)
+        burn = max(burn, min(int(min_burn), n_steps // 2))
         chain = sampler.get_chain(discard=burn, thin=thin, flat=True)
         acc = np.asarray(sampler.acceptance_fraction, dtype=float)
         length_tau = (n_steps - burn) / tau_max

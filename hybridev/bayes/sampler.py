@@ -182,7 +182,11 @@ def calibrate_physics(measured_trips, vehicle: VehicleParams | None = None, *,
         Start the walkers here (rows of another posterior's ``sampler_draws_``
         with the same parameters, e.g. the full posterior for a CV+ fold's
         trips) instead of around the MAP, which is then not searched: a warm
-        start that needs no long burn-in (:func:`warm_start_walkers`).
+        start (:func:`warm_start_walkers`). The first half of the run is discarded
+        whatever the run's own autocorrelation estimate says (too short a run
+        underestimates it): the walkers must first forget the other posterior's
+        trips, so the run should span several of *that* posterior's
+        autocorrelation times (:mod:`hybridev.learning.cvplus`).
     groups : "auto", str, array_like (n_trips,) or None
         Trips that share a day or session share part of their error (same
         weather, traffic, driver, tyre pressure). With groups the likelihood
@@ -402,8 +406,11 @@ def _warm_run(p0, logpost, n_walkers: int, ndim: int, n_steps, seed: int, progre
     legacy_seed = seed if seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
     sampler.random_state = np.random.RandomState(legacy_seed).get_state()
     sampler.run_mcmc(p0, int(n_steps), progress=progress)
+    # burn half the run: a short run's own autocorrelation time underestimates how long
+    # the walkers remember their start (the other posterior's draws)
     post = PhysicsPosterior.from_sampler(sampler, map_theta=np.median(p0, axis=0),
-                                         elapsed_s=time.perf_counter() - t0, **post_kw)
+                                         elapsed_s=time.perf_counter() - t0,
+                                         min_burn=int(n_steps) // 2, **post_kw)
     post.diagnostics["warm_start"] = True
     post.sampler_draws_ = _thinned_chain(sampler, post)
     finish(post)

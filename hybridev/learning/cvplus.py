@@ -21,8 +21,15 @@ chain-length warnings are silenced) and sampled with the full posterior's sign
 split, so all folds share one set of statistics at prediction time.
 
 Warm start (issue 34): each fold's walkers start at draws of the full posterior
-(:func:`hybridev.bayes.sampler.warm_start_walkers`) and run
-:data:`FOLD_WARM_STEPS` steps, with no MAP search. Chosen over importance
+(:func:`hybridev.bayes.sampler.warm_start_walkers`) and run :func:`fold_warm_steps`
+steps (:data:`FOLD_WARM_TAUS` of the full posterior's autocorrelation time, at least
+:data:`FOLD_WARM_STEPS`), with no MAP search; the first half is discarded. The full
+posterior has seen the held-out days: a run of a fixed 200 steps was about one of its
+autocorrelation times on M1 at 20 trips (tau 90-330 steps), whose own tau estimate
+(about 18 steps) burnt only some 50 steps, so the fold "posterior" stayed close to
+the full one and the out-of-fold scores were optimistic. When the full posterior
+mixes too slowly for that to fit in :data:`FOLD_POSTERIOR_STEPS` steps, the fold
+starts at its own MAP instead. Chosen over importance
 re-weighting of the full posterior's draws by ``1 / L(held-out trips)``: a fold
 holds out a fifth of the trips and, with the group (day) effect, whole days, so
 the weights are heavy-tailed (the effective sample size of IS leave-a-fifth-out is
@@ -30,9 +37,9 @@ typically a few percent of the draws) and the fallback would run in most folds;
 and the fold's posterior must also be a proper sample for its discrepancy fit.
 Removing a fifth of the trips moves the posterior by a fraction of its spread, so
 walkers drawn from the full posterior are already close to the fold's stationary
-distribution: the run needs no long burn-in, and the first half it discards (the
-burn-in of :meth:`~hybridev.bayes.posterior.PhysicsPosterior.from_sampler`) covers
-the remaining shift. A fold whose posterior has other dimensions than the full
+distribution, and the first half of the run, discarded (``min_burn`` of
+:meth:`~hybridev.bayes.posterior.PhysicsPosterior.from_sampler`), covers the
+remaining shift. A fold whose posterior has other dimensions than the full
 one (its trips are all labelled, so no mode weights to infer) falls back to the
 MAP start with :data:`FOLD_POSTERIOR_STEPS` steps. The per-fold diagnostics
 (start, steps, acceptance, autocorrelation time) are in ``fit_info_["cv_folds"]``
@@ -66,15 +73,21 @@ from hybridev.learning.features import trip_features
 from hybridev.learning.inputs import validate_prediction_trips
 from hybridev.learning.splits import group_holdout, group_kfold
 
-__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "MIN_GROUPS", "cv_fold_assignment",
-           "fit_cv_plus", "fold_diagnostics", "fold_variance", "nets_from_arrays",
+__all__ = ["FOLD_POSTERIOR_STEPS", "FOLD_WARM_STEPS", "FOLD_WARM_TAUS", "MIN_GROUPS", "cv_fold_assignment",
+           "fit_cv_plus", "fold_diagnostics", "fold_variance", "fold_warm_steps", "nets_from_arrays",
            "nets_to_arrays", "physics_from_arrays", "physics_to_arrays", "warn_calibration"]
 
 FOLD_POSTERIOR_STEPS = 800
 """emcee steps of a CV+ fold's physics posterior started at the MAP (cold start)."""
 
 FOLD_WARM_STEPS = 200
-"""emcee steps of a CV+ fold's physics posterior started at the full posterior's draws."""
+"""Fewest emcee steps of a CV+ fold's physics posterior started at the full posterior's draws."""
+
+FOLD_WARM_TAUS = 6.0
+"""A warm fold run lasts this many of the full posterior's autocorrelation times (at
+least :data:`FOLD_WARM_STEPS`); its first half (3 of them, the burn-in rule of
+:func:`hybridev.bayes.posterior.burn_and_thin`) is discarded. When that is longer
+than :data:`FOLD_POSTERIOR_STEPS` the fold starts at its own MAP instead."""
 
 MIN_GROUPS = 5
 """Fewer calibration groups than this warn at fit (coverage of new days is then
@@ -240,16 +253,29 @@ def cv_fold_assignment(codes: np.ndarray, cv_folds: int, ss: np.random.SeedSeque
     return _assignment(codes, cv_folds, ss)[0]
 
 
+def fold_warm_steps(post) -> int | None:
+    """emcee steps of a warm fold run from ``post`` (the full posterior), or None
+    (start at the fold's MAP): ``FOLD_WARM_TAUS`` of ``post``'s autocorrelation time
+    ``tau_max``, at least :data:`FOLD_WARM_STEPS`; None above :data:`FOLD_POSTERIOR_STEPS`
+    or without a finite ``tau_max``."""
+    tau = float(post.diagnostics.get("tau_max", np.nan))
+    if not math.isfinite(tau):
+        return None
+    steps = max(FOLD_WARM_STEPS, math.ceil(FOLD_WARM_TAUS * tau))
+    return steps if steps <= FOLD_POSTERIOR_STEPS else None
+
+
 def _fold_physics(physics, trips, seed: int, traces):
     """A fold's ``(posterior, discrepancy)``: warm start from the full posterior (see module)."""
     post = physics.posterior_
     draws = getattr(post, "sampler_draws_", None)
+    steps = fold_warm_steps(post) if draws is not None else None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        if draws is not None:
+        if steps is not None:
             p0 = warm_start_walkers(draws, int(post.diagnostics["n_walkers"]), seed)
             out = physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,
-                                     n_steps=FOLD_WARM_STEPS, init_walkers=p0)
+                                     n_steps=steps, init_walkers=p0)
             if out[0].diagnostics.get("warm_start"):
                 return out
         return physics.calibrated(trips, seed, traces, sign_vehicle=post.reference_vehicle,

@@ -40,6 +40,7 @@ def test_warm_run_on_a_subset_matches_a_cold_run(cold):
         ref = calibrate_physics(sub, params=("aux_base_kw",), n_walkers=8, n_steps=800,
                                 seed=5)
     assert warm.diagnostics["warm_start"] is True and warm.diagnostics["n_steps"] == 200
+    assert warm.diagnostics["burn_in"] == 100  # half the run, whatever its own tau says
     assert warm.sampler_draws_.shape[1] == p0.shape[1]
     sd = ref.samples[:, 0].std()
     assert abs(np.median(warm.samples[:, 0]) - np.median(ref.samples[:, 0])) < 0.5 * sd
@@ -54,3 +55,27 @@ def test_walkers_of_another_dimension_fall_back_to_the_map_start(cold):
         out = calibrate_physics(m, params=("aux_base_kw",), n_walkers=8, n_steps=100,
                                 init_walkers=p0)
     assert out.diagnostics["warm_start"] is False
+
+
+def test_fold_warm_run_spans_the_full_posteriors_autocorrelation_times(cold):
+    """A CV+ fold's warm run lasts FOLD_WARM_TAUS of the full posterior's tau (so that
+    its kept half has forgotten the held-out trips the start saw); too long: MAP start."""
+    from hybridev.learning.cvplus import (
+        FOLD_POSTERIOR_STEPS,
+        FOLD_WARM_STEPS,
+        FOLD_WARM_TAUS,
+        fold_warm_steps,
+    )
+
+    _, post = cold
+
+    class Tau:
+        def __init__(self, tau):
+            self.diagnostics = {"tau_max": tau}
+
+    assert fold_warm_steps(Tau(1.0)) == FOLD_WARM_STEPS
+    assert fold_warm_steps(Tau(100.0)) == int(np.ceil(FOLD_WARM_TAUS * 100.0))
+    assert fold_warm_steps(Tau(FOLD_POSTERIOR_STEPS / FOLD_WARM_TAUS + 1.0)) is None
+    assert fold_warm_steps(Tau(float("nan"))) is None
+    steps = fold_warm_steps(post)
+    assert steps is None or steps >= FOLD_WARM_TAUS * post.diagnostics["tau_max"]
