@@ -100,16 +100,21 @@ def made(tmp_path_factory):
     return tmp_path_factory.mktemp("made")
 
 
-def _made(write, made: Path, key: str, name: str):
-    """``(folder holding the old output, new snapshot)`` of writer ``key``, written once."""
+def _made(write, made: Path, key: str, name: str, deterministic: bool = True):
+    """``(folder holding the old output, new snapshot)`` of writer ``key``, written once.
+
+    ``deterministic=False``: no reference run (two runs' outputs differ), new snapshot None."""
     home = made / key
     if not home.exists():
         work = made / f".{key}"
         (work / "ref").mkdir(parents=True)
         (work / "old").mkdir()
-        r = write("2", work / "ref" / name, None)
-        assert r.returncode == 0, r.stderr
-        (work / "new.json").write_text(json.dumps(snapshot(work / "ref" / name)))
+        new = None
+        if deterministic:
+            r = write("2", work / "ref" / name, None)
+            assert r.returncode == 0, r.stderr
+            new = snapshot(work / "ref" / name)
+        (work / "new.json").write_text(json.dumps(new))
         r = write("1", work / "old" / name, None)
         assert r.returncode == 0, r.stderr
         work.rename(home)
@@ -123,7 +128,7 @@ def _case(write, target: Path, step: str, sig: str, expected: set[str], made: Pa
     ``deterministic=False`` (a report, which records its own run time): the new output of
     two runs differs, so "the complete new output" is a folder other than the old one
     that its manifest describes completely."""
-    old_dir, new = _made(write, made, key, target.name)
+    old_dir, new = _made(write, made, key, target.name, deterministic)
     shutil.copytree(old_dir, target.parent, symlinks=True)  # the old output, as written
     old = snapshot(target)
     assert old is not None and old != new
@@ -196,10 +201,14 @@ def test_report_folder(files, made, tmp_path, sig):
         src = tmp_path / f"measured{v}.csv"
         (meas if v == "1" else meas.head(50)).to_csv(src, index=False)
         return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
-                    "--members", "1", "--max-epochs", "3", "--quiet"], fault)
+                    "--members", "1", "--max-epochs", "3", "--posterior-steps", "100",
+                    "--quiet"], fault)
 
     _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"}, made, "report",
           deterministic=False)
+    summary = json.loads((tmp_path / "out" / "rep" / "summary.json").read_text())
+    assert summary["split"]["n_train"] + summary["split"]["n_test"] == 50  # the new input
+    assert summary["config"]["calibrate_kwargs"] == {"n_steps": 100}  # --posterior-steps
 
 
 def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):
