@@ -1,5 +1,5 @@
 """Fault injection on the real write paths: model folder, prediction file, fleet folder,
-report folder and demo folder (slow: each case starts a fresh process that imports torch).
+report folder and demo folder (slow: each case runs the writer in new processes).
 
 As in :mod:`tests.core.test_crash`: an old output is written, a run that would
 write a different new output is killed at a named step (``HYBRIDEV_FAULT``),
@@ -9,7 +9,14 @@ next run writes the new output and leaves nothing else beside it.
 The old output and the reference new output of each writer are written once per
 module by real runs (:func:`_made`); each case starts from a copy of the old
 output's folder (the same bytes: ownership and manifests are by content and
-relative name), so a case costs two fresh processes, the killed run and the next one.
+relative name), so a case costs two processes, the killed run and the next one.
+
+Those processes are fresh interpreters (``python -m hybridev.cli ...``) for the cases of
+each writer's first step (every signal) and for the report's SIGTERM case; the other
+cases run the same command in a forked child of one warm server per module
+(``tests/docs/warm_cli.py``: the child gets the case's environment, so
+``HYBRIDEV_FAULT``, and is killed by the real signal at the named step), which saves each
+process the 3-4 CPU-seconds of importing torch, dask and the rest.
 """
 
 import hashlib
@@ -28,18 +35,29 @@ import pytest
 from hybridev.core import swap
 from hybridev.core.outputs import MANIFEST_FILE, REGISTER_FILE
 
+sys.path.insert(0, str(Path(__file__).parents[1] / "docs"))
+from warm_cli import WarmCli, client_argv  # tests/docs is not a package
+
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).parents[2]
 SIGNALS = ("SIGINT", "SIGTERM", "SIGKILL")
 DIR_STEPS = [s for s in swap.STEPS["dir"] if s != "dir.old_moved"]
 
 
-def _py(args, fault=None, timeout=600):
+def _py(args, fault=None, timeout=600, warm=None):
+    """``python *args`` (``-m hybridev.cli ...`` or ``-c CODE``) in a fresh interpreter, or
+    through the warm server ``warm``; ``fault``: ``HYBRIDEV_FAULT`` of the run."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("HYBRIDEV_FAULT", None)
     if fault:
         env["HYBRIDEV_FAULT"] = fault
-    return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
+    cmd, program = [sys.executable, *args], None
+    if warm is not None and args[:2] == ["-m", "hybridev.cli"]:
+        cmd = client_argv(warm, args[2:])
+    elif warm is not None:
+        assert args[0] == "-c" and len(args) == 2, args
+        cmd, program = client_argv(warm, [], python=True), args[1]
+    return subprocess.run(cmd, env=env, input=program, capture_output=True, text=True,
                           timeout=timeout, preexec_fn=lambda: [
                               signal.signal(s, signal.SIG_DFL)
                               for s in (signal.SIGINT, signal.SIGTERM)])
@@ -92,6 +110,16 @@ def _complete(path: Path) -> bool:
     listed = {k for k, v in files.items() if v != "folder"}
     return held == listed and all(
         hashlib.sha256((path / k).read_bytes()).hexdigest() == files[k] for k in listed)
+
+
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory):
+    """The warm ``hybridev`` server of the module's cases (see the module docstring)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    env.pop("HYBRIDEV_FAULT", None)
+    cli = WarmCli(tmp_path_factory.mktemp("warm"), env)
+    yield cli
+    cli.close()
 
 
 @pytest.fixture(scope="module")
@@ -148,21 +176,25 @@ def _case(write, target: Path, step: str, sig: str, expected: set[str], made: Pa
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_model_folder(files, made, tmp_path, step, sig):
+def test_model_folder(files, made, warm, tmp_path, step, sig):
+    server = None if step == DIR_STEPS[0] else warm
+
     def write(v, path, fault):
-        code = ("import sys; from hybridev import HybridModel; "
-                "HybridModel.load(sys.argv[1]).save(sys.argv[2])")
-        return _py(["-c", code, str(files / f"model{v}"), str(path)], fault)
+        code = (f"from hybridev import HybridModel; "
+                f"HybridModel.load({str(files / f'model{v}')!r}).save({str(path)!r})")
+        return _py(["-c", code], fault, warm=server)
 
     _case(write, tmp_path / "out" / "m", step, sig, {"m"}, made, "model")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["file"])
-def test_prediction_file(files, made, tmp_path, step, sig):
+def test_prediction_file(files, made, warm, tmp_path, step, sig):
+    server = None if step == swap.STEPS["file"][0] else warm
+
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"),
-                    str(files / f"trips{v}.csv"), "--out", str(path)], fault)
+                    str(files / f"trips{v}.csv"), "--out", str(path)], fault, warm=server)
 
     _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE}, made, "pred")
 
@@ -186,23 +218,27 @@ def scheduler():
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_fleet_folder(files, made, scheduler, tmp_path, step, sig):
+def test_fleet_folder(files, made, scheduler, warm, tmp_path, step, sig):
+    server = None if step == DIR_STEPS[0] else warm
+
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
-                    "--out", str(path), "--scheduler", scheduler], fault)
+                    "--out", str(path), "--scheduler", scheduler], fault, warm=server)
 
     _case(write, tmp_path / "out" / "preds", step, sig, {"preds"}, made, "fleet")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_report_folder(files, made, tmp_path, sig):
+def test_report_folder(files, made, warm, tmp_path, sig):
+    server = None if sig == "SIGTERM" else warm
+
     def write(v, path, fault):
         meas = pd.read_csv(files / "measured.csv")
         src = tmp_path / f"measured{v}.csv"
         (meas if v == "1" else meas.head(50)).to_csv(src, index=False)
         return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
                     "--members", "1", "--max-epochs", "3", "--posterior-steps", "100",
-                    "--quiet"], fault)
+                    "--quiet"], fault, warm=server)
 
     _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"}, made, "report",
           deterministic=False)

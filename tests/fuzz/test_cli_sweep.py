@@ -188,3 +188,5 @@ def test_cli_sweep_500(pool, tmp_path, monkeypatch):
     tally = _sweep(pool, tmp_path, monkeypatch, range(1000, 1500))
     print("CLI sweep, 500 cases, (command, exit code) -> count:", dict(sorted(tally.items())))
     assert sum(tally.values()) == 500
+    for cmd in {c for c, _ in tally}:  # each command both ran through and refused a case
+        assert tally[cmd, 0] > 0 and tally[cmd, 2] > 0, (cmd, dict(tally))
