@@ -40,9 +40,21 @@ in-domain trips, and for flagged trips it assumes the widening scales with ``q``
   planned: the Harrell-Davis quantile at ``level (1 + 1/n_eff) / (1 + 1/n)``, capped at
   ``n / (n + 1)``); with ``rho = 0`` it is the current quantile exactly. ``rho`` from
   the ranks of ``|r|``; ``neff_signed`` the same with ``rho`` of the signed scores;
+* ``hd_level`` (planned only): the Harrell-Davis level whose weights' mean rank
+  ``n p' + 1/2`` is the conformal order ``(n + 1) level``: ``p' = level (1 + 1/n) -
+  1/(2 n)`` (the default ``p' = level`` aims at the mean rank ``n level + 1/2``, i.e. an
+  expected coverage of about ``(n level + 1/2) / (n + 1)``, 0.887 at 30 scores);
+  ``neff_hd`` the same with ``n_eff`` in place of ``n`` in ``1 + 1/n``;
 * ``all_scores`` (planned only): the quantile over every scored trip, the ones
   outside their fold's training domain included (the default drops them when at
   least ``MIN_INSIDE`` are inside);
+* ``c_lodo`` (planned only): the excess relative spread ``c`` of the normaliser
+  ``sqrt(s^2 + v + (c mu)^2)`` (:mod:`hybridev.learning.planned`) estimated, for each
+  scored trip, without the trips of its own day (leave one day out; from the
+  calibrator's kept inputs ``scored_``), as the final ``c`` is estimated without the
+  new trip's day: the default estimates ``c`` on the very scores it normalises, which
+  makes them look like unit-spread in sample; the intervals keep the pooled ``c``;
+  ``c_lodo_neff_hd`` the same with the ``neff_hd`` level;
 * ``day_pooled``: the pooled-CDF rule of Dunn, Wasserman & Ramdas (2023, JASA,
   "Distribution-free prediction sets for two-layer hierarchical models"): every day
   weighs the same, the ``level (1 + 1/D)`` quantile of the day-averaged empirical
@@ -75,13 +87,17 @@ from scipy.stats import rankdata
 from study_io import DEFAULT_DATA, run_study, write_markdown
 
 from hybridev import HybridModel
+from hybridev.learning.planned_bias import excess_rel
 from hybridev.learning.smoothed import harrell_davis
 from hybridev.learning.trace_gap import logged_elevation_m
 
 HERE = Path(__file__).resolve().parent
 ORDERS = (0, 10, 20, 100, 200, 300)
 SIZES = (40, 20)
-CANDIDATES = ("current", "neff", "neff_signed", "all_scores", "day_pooled")
+CANDIDATES = ("current", "neff", "neff_signed", "hd_level", "neff_hd", "all_scores",
+              "c_lodo", "c_lodo_neff_hd", "day_pooled")
+PLANNED_ONLY = ("hd_level", "neff_hd", "all_scores", "c_lodo", "c_lodo_neff_hd")
+"""Candidates that differ from another one only for the planned (Harrell-Davis) quantile."""
 
 
 # -- the fits ------------------------------------------------------------------------------
@@ -112,6 +128,9 @@ def _fit(m, date, vehicle, tr, te, k, grade, climb) -> dict:
                      "flagged": ~out["in_domain"].to_numpy(bool),
                      "scores": np.asarray(r, float), "gap": np.asarray(gap, float),
                      "q": float(q)}
+    sc = getattr(cal, "scored_", None)  # the planned scores' inputs (kWh), when kept
+    rec["planned"]["scored"] = None if sc is None else {
+        **{k: np.asarray(v, float) for k, v in sc.items()}, "c": float(cal.excess_rel_)}
     return rec
 
 
@@ -184,12 +203,19 @@ def _current(a: np.ndarray, level: float, smoothed: bool) -> float:
         np.sort(a)[math.ceil((n + 1) * level) - 1])
 
 
-def _neff_quantile(a: np.ndarray, level: float, n_eff: float, smoothed: bool) -> float:
-    """The quantile at the finite-sample level of ``n_eff`` independent scores."""
+def _neff_quantile(a: np.ndarray, level: float, n_eff: float, smoothed: bool, *,
+                   hd_level: bool = False) -> float:
+    """The quantile at the finite-sample level of ``n_eff`` independent scores.
+
+    ``hd_level``: the Harrell-Davis level ``p'`` whose mean order ``n p' + 1/2`` (the
+    weights' mean rank) is the conformal order ``n level (1 + 1/n_eff)``, i.e.
+    ``p' = level (1 + 1/n_eff) - 1/(2 n)`` (else ``level (1 + 1/n_eff) / (1 + 1/n)``,
+    the current level at ``n_eff = n``)."""
     n = a.size
     if smoothed:
-        lev = min(level * (1 + 1 / n_eff) / (1 + 1 / n), n / (n + 1))
-        return harrell_davis(np.sort(a), lev)
+        lev = (level * (1 + 1 / n_eff) - 0.5 / n if hd_level
+               else level * (1 + 1 / n_eff) / (1 + 1 / n))
+        return harrell_davis(np.sort(a), min(lev, n / (n + 1)))
     k = min(math.ceil(n * level * (1 + 1 / n_eff) - 1e-9), n)
     return float(np.sort(a)[k - 1])
 
@@ -208,6 +234,19 @@ def day_pooled(a: np.ndarray, groups: np.ndarray, level: float) -> float:
     return float(a[o][min(np.searchsorted(cdf, target - 1e-12), len(a) - 1)])
 
 
+def lodo_scores(sc: dict, inside: np.ndarray, days) -> np.ndarray:
+    """Planned scores (n,) with the excess spread ``c`` of each trip's normaliser
+    estimated without its own day (leave one day out; ``days`` None: with every day,
+    the default pooled ``c``, which reproduces ``residuals_``)."""
+    y, mu, sd = sc["y"], sc["mean"], np.sqrt(sc["std"] ** 2 + sc["fold_var"])
+    c = np.full(len(y), sc["c"])
+    if days is not None:
+        for d in np.unique(days):
+            keep = inside & (days != d)
+            c[days == d] = excess_rel(y, mu, sd, keep) if keep.any() else sc["c"]
+    return (y - mu) / np.sqrt(sd**2 + (c * mu) ** 2)
+
+
 def candidates(rec: dict, mode: str) -> dict:
     """Quantile of every candidate (and the diagnostics) of one fit's ``mode`` scores."""
     s = rec[mode]
@@ -220,6 +259,7 @@ def candidates(rec: dict, mode: str) -> dict:
     smoothed = mode == "planned"
     a, g = np.abs(r[inside]), (days[inside] if ok else None)
     out = {"q": s["q"], "current": _current(a, LEVEL, smoothed), "n": int(a.size),
+           "mean_abs": float(a.mean()),
            "n_all": len(r), "days": len(np.unique(days))}
     if ok:
         rho, ne = n_effective(r[inside], g)
@@ -227,10 +267,24 @@ def candidates(rec: dict, mode: str) -> dict:
         out.update(rho=rho, n_eff=ne, rho_signed=rho_s, n_eff_signed=ne_s,
                    neff=_neff_quantile(a, LEVEL, ne, smoothed),
                    neff_signed=_neff_quantile(a, LEVEL, ne_s, smoothed),
+                   neff_hd=_neff_quantile(a, LEVEL, ne, smoothed, hd_level=True),
+                   rho_exceed=icc((a > s["q"]).astype(float), g),
                    day_pooled=day_pooled(a, g, LEVEL))
     else:
         out.update({c: math.nan for c in ("rho", "n_eff", "rho_signed", "n_eff_signed",
-                                          "neff", "neff_signed", "day_pooled")})
+                                          "neff", "neff_signed", "neff_hd", "rho_exceed",
+                                          "day_pooled")})
+    out["hd_level"] = _neff_quantile(a, LEVEL, a.size, smoothed, hd_level=True)
+    sc = s.get("scored")
+    if smoothed and ok and sc is not None:
+        lodo = lodo_scores(sc, inside, days)
+        out["c_lodo"] = _current(np.abs(lodo[inside]), LEVEL, smoothed)
+        out["c_lodo_neff_hd"] = _neff_quantile(np.abs(lodo[inside]), LEVEL, out["n_eff"],
+                                               smoothed, hd_level=True)
+        out["pooled_check"] = float(np.max(np.abs(lodo_scores(sc, inside, None) - r)))
+    else:
+        out["c_lodo"] = out["c_lodo_neff_hd"] = out["current"]
+        out["pooled_check"] = math.nan
     out["all_scores"] = _current(np.abs(r), LEVEL, smoothed) if smoothed else out["current"]
     return out
 
@@ -265,10 +319,21 @@ def _diagnostics(rec: dict, mode: str) -> dict:
     keep = ~s["flagged"]
     mid, half = (s["lo"] + s["hi"]) / 2, (s["hi"] - s["lo"]) / 2
     t = (np.abs(rec["y"] - mid) * q["q"] / half)[keep]
-    r = np.abs(s["scores"])
+    cover = np.abs(rec["y"] - mid) <= half
+    sc = s.get("scored")
+    c_fit = c_test = math.nan
+    if sc is not None:  # the excess spread c the held-out in-domain trips show, as fitted
+        c_fit = sc["c"]
+        y, m_ = rec["y"][keep], mid[keep]
+        s2 = np.maximum((half[keep] / q["q"]) ** 2 - (c_fit * m_) ** 2, 0.0)
+        c_test = float(np.sqrt(max(np.mean(((y - m_) ** 2 - s2) / m_**2), 0.0)))
     return {"test_q90_over_q": float(np.quantile(t, 0.9) / q["q"]),
-            "test_mean_over_train_mean": float(t.mean() / r.mean()),
-            "test_rho": icc(rankdata(t), rec["test_days"][keep])}
+            "test_mean_over_train_mean": float(t.mean() / q["mean_abs"]),
+            "test_rho": icc(rankdata(t), rec["test_days"][keep]),
+            "test_rho_signed": icc(((rec["y"] - mid) / half)[keep], rec["test_days"][keep]),
+            "c_fit": c_fit, "c_test": c_test,
+            "in_domain_n": int(keep.sum()), "in_domain_covered": int(cover[keep].sum()),
+            "flagged_n": int((~keep).sum()), "flagged_covered": int(cover[~keep].sum())}
 
 
 def _mean_se(v) -> tuple[float, float]:
@@ -282,7 +347,8 @@ def tables(records: list[dict]) -> dict:
     for rec in records:
         rec["cand"] = {mode: candidates(rec, mode) for mode in ("planned", "traced")}
     out = {}
-    sizes = sorted({r["size"] for r in records}, key=lambda s: (s != "all", s))
+    sizes = sorted({r["size"] for r in records},
+                   key=lambda s: (s != "all", -s if isinstance(s, int) else 0))
     for size in sizes:
         recs = [r for r in records if r["size"] == size]
         orders = sorted({r["order"] for r in recs})
@@ -293,8 +359,11 @@ def tables(records: list[dict]) -> dict:
             summary = {}
             for c, ds in draws.items():
                 cov, cov_se = _mean_se([d["coverage"] for d in ds])
+                gain, gain_se = _mean_se([d["coverage"] - b["coverage"]
+                                          for d, b in zip(ds, draws["current"], strict=True)])
                 sh, sh_se = _mean_se([d["sharpness_ratio"] for d in ds])
                 summary[c] = {"coverage_mean": cov, "coverage_se": cov_se,
+                              "coverage_gain": gain, "coverage_gain_se": gain_se,
                               "sharpness_mean": sh, "sharpness_se": sh_se,
                               "finite_draws": int(sum(d["finite"] for d in ds)),
                               "per_order": [{"order": o, **d} for o, d in
@@ -305,16 +374,31 @@ def tables(records: list[dict]) -> dict:
                 fits_.append({"order": r["order"], "fold": r["fold"], "days": c["days"],
                               "n": c["n"], "n_all": c["n_all"], "q": c["q"],
                               "q_check": c["current"], "rho": c["rho"], "n_eff": c["n_eff"],
-                              "rho_signed": c["rho_signed"], "q_neff": c["neff"],
+                              "rho_signed": c["rho_signed"], "rho_exceed": c["rho_exceed"],
+                              "q_neff": c["neff"], "q_neff_hd": c["neff_hd"],
+                              "q_hd_level": c["hd_level"], "q_c_lodo": c["c_lodo"],
+                              "pooled_check": c["pooled_check"],
                               "q_all_scores": c["all_scores"], "q_day_pooled": c["day_pooled"],
                               **_diagnostics(r, mode)})
             diag = {k: _mean_se([f[k] for f in fits_])[0] for k in
-                    ("days", "n", "rho", "rho_signed", "n_eff", "test_q90_over_q",
-                     "test_mean_over_train_mean", "test_rho")}
+                    ("days", "n", "rho", "rho_signed", "rho_exceed", "n_eff",
+                     "test_q90_over_q", "test_mean_over_train_mean", "test_rho",
+                     "test_rho_signed", "c_fit", "c_test")}
+            for g in ("in_domain", "flagged"):
+                n_g = sum(f[f"{g}_n"] for f in fits_)
+                diag[f"{g}_n"] = n_g
+                diag[f"{g}_coverage"] = (sum(f[f"{g}_covered"] for f in fits_) / n_g
+                                         if n_g else math.nan)
+            checks = [f["pooled_check"] for f in fits_ if np.isfinite(f["pooled_check"])]
+            diag["pooled_check_max"] = max(checks) if checks else math.nan
             diag["q_matches"] = bool(all(abs(f["q"] - f["q_check"]) < 1e-9 for f in fits_))
             res[mode] = {"candidates": summary, "diagnostics": diag, "fits": fits_}
         out[str(size)] = res
     return out
+
+
+def _sgn(x: float) -> str:
+    return "—" if not np.isfinite(x) else f"{x:+.3f}"
 
 
 def _fmt(x: float, nd: int = 3) -> str:
@@ -333,15 +417,17 @@ def _markdown(t: dict, runtime_s: float) -> list[str]:
         title = "All training trips of each fold" if size == "all" else (
             f"{size} training trips per fold (whole days), {len(res['orders'])} day orders")
         lines += [f"## {title}", "",
-                  "| prediction | quantile | coverage (mean ± SE) | sharpness ratio "
-                  "(mean ± SE) | finite draws |", "|---|---|---|---|---|"]
+                  "| prediction | quantile | coverage (mean ± SE) | gain over current "
+                  "(paired, mean ± SE) | sharpness ratio (mean ± SE) | finite draws |",
+                  "|---|---|---|---|---|---|"]
         for mode in ("planned", "traced"):
             for c in CANDIDATES:
-                if mode == "traced" and c == "all_scores":
+                if mode == "traced" and c in PLANNED_ONLY:
                     continue
                 s = res[mode]["candidates"][c]
                 lines.append(f"| {mode} | {c} | {_fmt(s['coverage_mean'])} ± "
-                             f"{_fmt(s['coverage_se'])} | {_fmt(s['sharpness_mean'], 2)} ± "
+                             f"{_fmt(s['coverage_se'])} | {_sgn(s['coverage_gain'])} ± "
+                             f"{_fmt(s['coverage_gain_se'])} | {_fmt(s['sharpness_mean'], 2)} ± "
                              f"{_fmt(s['sharpness_se'], 2)} | {s['finite_draws']}/"
                              f"{len(res['orders'])} |")
         lines += ["", "Per day order (current | neff):", "",
@@ -358,17 +444,27 @@ def _markdown(t: dict, runtime_s: float) -> list[str]:
                   "effective number of scores, and the in-domain held-out trips' scores on "
                   "the same footing: their 90 % quantile over the quantile used, their mean "
                   "over the training scores' mean, their own within-day correlation.", "",
-                  "| prediction | days | n | rho | rho signed | n_eff | test q90 / q | "
-                  "test mean / train mean | test rho | q reproduced |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "| prediction | days | n | rho | rho signed | rho of exceedances | n_eff | "
+                  "test q90 / q | test mean / train mean | test rho | test rho signed | "
+                  "in-domain held-out trips: coverage | flagged: trips, coverage | "
+                  "q reproduced |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for mode in ("planned", "traced"):
             d = res[mode]["diagnostics"]
             lines.append(f"| {mode} | {_fmt(d['days'], 1)} | {_fmt(d['n'], 1)} | "
                          f"{_fmt(d['rho'], 2)} | {_fmt(d['rho_signed'], 2)} | "
+                         f"{_fmt(d['rho_exceed'], 2)} | "
                          f"{_fmt(d['n_eff'], 1)} | {_fmt(d['test_q90_over_q'], 2)} | "
                          f"{_fmt(d['test_mean_over_train_mean'], 2)} | "
-                         f"{_fmt(d['test_rho'], 2)} | {d['q_matches']} |")
-        lines.append("")
+                         f"{_fmt(d['test_rho'], 2)} | {_fmt(d['test_rho_signed'], 2)} | "
+                         f"{_fmt(d['in_domain_coverage'])} | {d['flagged_n']}, "
+                         f"{_fmt(d['flagged_coverage'])} | {d['q_matches']} |")
+        d = res["planned"]["diagnostics"]
+        lines += ["", "Planned: the excess relative spread `c` of the normaliser as fitted "
+                  f"(mean over the fits) {_fmt(d['c_fit'])}; the same moment estimate on "
+                  f"the in-domain held-out trips (their `s` from the interval) "
+                  f"{_fmt(d['c_test'])}. Planned scores recomputed from the kept inputs "
+                  "(`scored_`) with the pooled `c`: largest difference from `residuals_` "
+                  f"{d['pooled_check_max']:.1e}.", ""]
     return lines
 
 
