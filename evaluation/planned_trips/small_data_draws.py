@@ -54,7 +54,8 @@ in-domain trips, and for flagged trips it assumes the widening scales with ``q``
   calibrator's kept inputs ``scored_``), as the final ``c`` is estimated without the
   new trip's day: the default estimates ``c`` on the very scores it normalises, which
   makes them look like unit-spread in sample; the intervals keep the pooled ``c``;
-  ``c_lodo_neff_hd`` the same with the ``neff_hd`` level;
+  ``c_lodo_hd`` the same with the ``hd_level`` level, ``c_lodo_neff_hd`` with the
+  ``neff_hd`` level;
 * ``day_pooled``: the pooled-CDF rule of Dunn, Wasserman & Ramdas (2023, JASA,
   "Distribution-free prediction sets for two-layer hierarchical models"): every day
   weighs the same, the ``level (1 + 1/D)`` quantile of the day-averaged empirical
@@ -95,8 +96,8 @@ HERE = Path(__file__).resolve().parent
 ORDERS = (0, 10, 20, 100, 200, 300, 400, 500, 600, 700)
 SIZES = (40, 20)
 CANDIDATES = ("current", "neff", "neff_signed", "hd_level", "neff_hd", "all_scores",
-              "c_lodo", "c_lodo_neff_hd", "day_pooled")
-PLANNED_ONLY = ("hd_level", "neff_hd", "all_scores", "c_lodo", "c_lodo_neff_hd")
+              "c_lodo", "c_lodo_hd", "c_lodo_neff_hd", "day_pooled")
+PLANNED_ONLY = ("hd_level", "neff_hd", "all_scores", "c_lodo", "c_lodo_hd", "c_lodo_neff_hd")
 """Candidates that differ from another one only for the planned (Harrell-Davis) quantile."""
 
 
@@ -280,11 +281,13 @@ def candidates(rec: dict, mode: str) -> dict:
     if smoothed and ok and sc is not None:
         lodo = lodo_scores(sc, inside, days)
         out["c_lodo"] = _current(np.abs(lodo[inside]), LEVEL, smoothed)
+        out["c_lodo_hd"] = _neff_quantile(np.abs(lodo[inside]), LEVEL, inside.sum(),
+                                          smoothed, hd_level=True)
         out["c_lodo_neff_hd"] = _neff_quantile(np.abs(lodo[inside]), LEVEL, out["n_eff"],
                                                smoothed, hd_level=True)
         out["pooled_check"] = float(np.max(np.abs(lodo_scores(sc, inside, None) - r)))
     else:
-        out["c_lodo"] = out["c_lodo_neff_hd"] = out["current"]
+        out["c_lodo"] = out["c_lodo_hd"] = out["c_lodo_neff_hd"] = out["current"]
         out["pooled_check"] = math.nan
     out["all_scores"] = _current(np.abs(r), LEVEL, smoothed) if smoothed else out["current"]
     return out
