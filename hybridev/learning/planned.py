@@ -129,6 +129,9 @@ class PlannedTripCalibrator:
         Relative spread ``c`` of the summary-only errors beyond the model's own
         spread (dimensionless, >= 0; 0 in files saved before it existed): the scores
         are normalised by ``s' = sqrt(s^2 + (c mu)^2)``.
+    scored_ : dict of numpy.ndarray, shape (n,) each
+        The scored trips' ``y``, ``mean``, ``std`` (kWh) and ``fold_var`` (kWh^2) after
+        the mean correction, for studies (``evaluation/planned_trips``); not saved.
 
     Examples
     --------
@@ -189,6 +192,7 @@ class PlannedTripCalibrator:
         if g.shape != y.shape:
             raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
+        self.scored_ = {"y": y, "mean": mean, "std": std, "fold_var": v}  # not saved
         self.excess_rel_ = excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
         cp = NormalizedConformal.fit(y, mean, np.sqrt(self._normaliser(mean, std) ** 2 + v))
         self.residuals_, self.gap_, self.smoothed_ = cp.residuals, g, True
