@@ -56,6 +56,10 @@ in-domain trips, and for flagged trips it assumes the widening scales with ``q``
   makes them look like unit-spread in sample; the intervals keep the pooled ``c``;
   ``c_lodo_hd`` the same with the ``hd_level`` level, ``c_lodo_neff_hd`` with the
   ``neff_hd`` level;
+* since the library's rule 2 (:mod:`hybridev.learning.planned_scores`) the fitted
+  planned scores are the ``c_lodo`` ones and ``current`` is their Harrell-Davis quantile
+  at the ``hd_level`` level: ``current``, ``hd_level``, ``c_lodo`` and ``c_lodo_hd``
+  coincide; the other planned candidates rescale from there;
 * ``day_pooled``: the pooled-CDF rule of Dunn, Wasserman & Ramdas (2023, JASA,
   "Distribution-free prediction sets for two-layer hierarchical models"): every day
   weighs the same, the ``level (1 + 1/D)`` quantile of the day-averaged empirical
@@ -89,6 +93,7 @@ from study_io import DEFAULT_DATA, run_study, write_markdown
 
 from hybridev import HybridModel
 from hybridev.learning.planned_bias import excess_rel
+from hybridev.learning.planned_scores import hd_level
 from hybridev.learning.smoothed import harrell_davis
 from hybridev.learning.trace_gap import logged_elevation_m
 
@@ -196,12 +201,13 @@ def n_effective(scores: np.ndarray, groups: np.ndarray, *, signed: bool = False)
 
 
 def _current(a: np.ndarray, level: float, smoothed: bool) -> float:
-    """The default quantile of the scores ``|r|`` ``a``: Harrell-Davis (planned) or the
-    order statistic ``ceil((n + 1) level)`` (traced)."""
+    """The default quantile of the scores ``|r|`` ``a``: Harrell-Davis at the level of
+    rule 2 (planned, :func:`~hybridev.learning.planned_scores.hd_level`) or the order
+    statistic ``ceil((n + 1) level)`` (traced)."""
     n = a.size
     if math.ceil((n + 1) * level) > n:
         return math.inf
-    return harrell_davis(np.sort(a), level) if smoothed else float(
+    return harrell_davis(np.sort(a), hd_level(level, n)) if smoothed else float(
         np.sort(a)[math.ceil((n + 1) * level) - 1])
 
 
@@ -285,7 +291,7 @@ def candidates(rec: dict, mode: str) -> dict:
                                           smoothed, hd_level=True)
         out["c_lodo_neff_hd"] = _neff_quantile(np.abs(lodo[inside]), LEVEL, out["n_eff"],
                                                smoothed, hd_level=True)
-        out["pooled_check"] = float(np.max(np.abs(lodo_scores(sc, inside, None) - r)))
+        out["pooled_check"] = float(np.max(np.abs(lodo - r)))  # rule 2: the fitted scores
     else:
         out["c_lodo"] = out["c_lodo_hd"] = out["c_lodo_neff_hd"] = out["current"]
         out["pooled_check"] = math.nan
@@ -475,7 +481,8 @@ def _markdown(t: dict, runtime_s: float) -> list[str]:
                   f"(mean over the fits) {_fmt(d['c_fit'])}; the same moment estimate on "
                   f"the in-domain held-out trips (their `s` from the interval) "
                   f"{_fmt(d['c_test'])}. Planned scores recomputed from the kept inputs "
-                  "(`scored_`) with the pooled `c`: largest difference from `residuals_` "
+                  "(`scored_`) with the leave-one-day-out `c`: largest difference from "
+                  "`residuals_` "
                   f"{d['pooled_check_max']:.1e}.", ""]
     return lines
 
