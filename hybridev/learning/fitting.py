@@ -231,7 +231,8 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
     :func:`~hybridev.learning.trace_gap.fold_gap_factors`;
     split: the held-out trips by the final model) are predicted again *without* their
     traces, against their measured energy (CV+: net of the fold models' extra variance,
-    :func:`~hybridev.learning.cvplus.fold_variance`) (and, when the traces log elevation, again
+    :func:`~hybridev.learning.cvplus.fold_variance`; each day's scores with the excess spread
+    of the other days, ``groups=split.codes``) (and, when the traces log elevation, again
     with their logged net grade: ``planned.graded_``, for planned trips given a
     ``grade_pct``); the domain is then returned with ``needs_trace=False``. ``gap_rate`` (a :class:`~hybridev.learning.shift.GapRate`)
     whenever there is a conformal step; it pools the scores with traces and (when
@@ -288,7 +289,7 @@ def fit_planned(model, good: pd.DataFrame, traces, split: FitSplit, e_meas: np.n
                 e_meas[idx], mu * factor[idx], np.maximum(sd * factor[idx], 1e-12), g_plan,
                 conditions=conditions_of(trips.iloc[idx]),
                 fold=fold[idx] if len(cv) > 1 else None,  # one fold: blocks, as split
-                trace_gap=gap, fold_var=v * factor[idx] ** 2)
+                trace_gap=gap, fold_var=v * factor[idx] ** 2, groups=split.codes[idx])
 
         g_plan, h_plan = (g[idx] for g in fold_gaps(good, fold, traces, score_traces=None,
                                                      interior=True))

@@ -37,12 +37,13 @@ temperatures.
 The model's own spread ``s`` (learned on logged traces) does not know how far a
 synthesised trace is from this car's driving (on M1 the summary-only errors are
 about twice the traced ones, ``evaluation/planned_trips``). The normaliser is
-``s' = sqrt(s^2 + (c mu)^2)``, with ``c`` the relative spread the scored trips
-show beyond ``s`` (moment estimate on the in-domain scored trips,
-``c^2 = max(mean(((E - mu)^2 - s^2 - v) / mu^2), 0)``, ``excess_rel_``). The CV+ fold
-models that score the trips vary more than the final model by ``v``
-(:func:`~hybridev.learning.cvplus.fold_variance`), so the scores are
-``(E - mu) / sqrt(s'^2 + v)``: their quantile applies to the final model's ``s'``.
+``s' = sqrt(s^2 + (c mu)^2)``, ``c`` the relative spread the in-domain scored trips
+show beyond ``s`` (``c^2 = max(mean(((E - mu)^2 - s^2 - v) / mu^2), 0)``,
+``excess_rel_``). The CV+ fold models that score the trips vary more than the final
+model by ``v`` (:func:`~hybridev.learning.cvplus.fold_variance`), so the scores are
+``(E - mu) / sqrt(s'^2 + v)``, each day's with ``c`` estimated without that day, and
+their Harrell-Davis quantile is taken at a corrected level (rule 2,
+:mod:`hybridev.learning.planned_scores`).
 
 These scores (``mu``, ``s``: the scoring model's) make a :class:`PlannedTripCalibrator`.
 A planned trip's interval is ``mu +- q s'`` with the final model's ``mu`` and ``s'``
@@ -79,7 +80,6 @@ import dataclasses
 import numpy as np
 import pandas as pd
 
-from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.planned_bias import (
     CORRECTION_TERMS,
     correction_design,
@@ -87,8 +87,8 @@ from hybridev.learning.planned_bias import (
     cross_fitted_log_factor,
     excess_rel,
 )
+from hybridev.learning.planned_scores import RULE, conformal_rule, lodo_excess_rel, saved_rule
 from hybridev.learning.predictive import raw_prediction
-from hybridev.learning.smoothed import SmoothedConformal
 from hybridev.learning.steps import CalibratedInterval, RawPrediction
 from hybridev.learning.trace_gap import (
     TraceGap,
@@ -112,10 +112,10 @@ class PlannedTripCalibrator:
         trips predicted without their traces.
     gap_ : numpy.ndarray, shape (n,)
         Each scored trip's largest intensive gap to its fold's training domain.
-    conformal_ : SmoothedConformal
+    conformal_ : LevelCorrectedSmoothed
         The scores used for intervals: those with ``gap_ <= 1`` when at least
-        :data:`MIN_INSIDE` of them, else all (``smoothed_`` False, files saved before
-        it: a NormalizedConformal).
+        :data:`MIN_INSIDE` of them, else all (:func:`~hybridev.learning.planned_scores.
+        conformal_rule` of ``smoothed_`` and ``rule_``: older files keep their rule).
     graded_ : PlannedTripCalibrator or None
         The same calibration with the scored trips given their logged net grade
         (``grade_pct``): it serves the planned trips given a ``grade_pct``, this one
@@ -129,6 +129,9 @@ class PlannedTripCalibrator:
         Relative spread ``c`` of the summary-only errors beyond the model's own
         spread (dimensionless, >= 0; 0 in files saved before it existed): the scores
         are normalised by ``s' = sqrt(s^2 + (c mu)^2)``.
+    scored_ : dict of numpy.ndarray, shape (n,) each
+        The scored trips' ``y``, ``mean``, ``std`` (kWh) and ``fold_var`` (kWh^2) after
+        the mean correction, for studies (``evaluation/planned_trips``); not saved.
 
     Examples
     --------
@@ -142,9 +145,10 @@ class PlannedTripCalibrator:
 
     MIN_INSIDE = 19  # in-domain scores needed to drop the shifted ones from the quantile
     smoothed_ = False  # files saved before the smoothed quantile: the order statistic
+    rule_ = 1  # files saved before rule 2 (hybridev.learning.planned_scores)
 
     def fit(self, y, mean, std, gap=None, *, conditions=None, fold=None, trace_gap=None,
-            fold_var=None) -> PlannedTripCalibrator:
+            fold_var=None, groups=None) -> PlannedTripCalibrator:
         """Scores (and the mean correction) from measured energies and summary-only predictions.
 
         Parameters
@@ -165,6 +169,9 @@ class PlannedTripCalibrator:
         fold_var : array_like, shape (n,), kWh^2, optional
             ``v``, how much more the scoring fold models' predictions vary than the final
             model's (:func:`~hybridev.learning.cvplus.fold_variance`; default 0).
+        groups : array_like, shape (n,), optional
+            Day of each trip: its score's ``c`` is estimated without its day
+            (:mod:`hybridev.learning.planned_scores`; default: the pooled ``c``).
         """
         y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
         v = np.zeros(len(y)) if fold_var is None else np.asarray(fold_var, float)
@@ -189,9 +196,13 @@ class PlannedTripCalibrator:
         if g.shape != y.shape:
             raise ValueError(f"gap must have one value per trip ({len(y)}); "
                              f"got shape {g.shape}")
-        self.excess_rel_ = excess_rel(y, mean, np.sqrt(std**2 + v), self._inside(g))
-        cp = NormalizedConformal.fit(y, mean, np.sqrt(self._normaliser(mean, std) ** 2 + v))
-        self.residuals_, self.gap_, self.smoothed_ = cp.residuals, g, True
+        self.scored_ = {"y": y, "mean": mean, "std": std, "fold_var": v}  # not saved
+        sd, inside = np.sqrt(std**2 + v), self._inside(g)
+        self.excess_rel_ = excess_rel(y, mean, sd, inside)  # the intervals' (pooled) c
+        c = (self.excess_rel_ if groups is None
+             else lodo_excess_rel(y, mean, sd, inside, groups))  # the scores' c
+        self.residuals_ = (y - mean) / np.sqrt(sd**2 + (c * mean) ** 2)
+        self.gap_, self.smoothed_, self.rule_ = g, True, RULE
         self._build()
         return self
 
@@ -202,8 +213,7 @@ class PlannedTripCalibrator:
         return inside if inside.sum() >= self.MIN_INSIDE else np.ones(len(gap), dtype=bool)
 
     def _build(self) -> None:
-        rule = SmoothedConformal if self.smoothed_ else NormalizedConformal
-        self.conformal_ = rule(self.residuals_[self._inside(self.gap_)])
+        self.conformal_ = conformal_rule(self.smoothed_, self.rule_)(self.residuals_[self._inside(self.gap_)])
 
     def _normaliser(self, mean, std) -> np.ndarray:
         """Spread of a summary-only prediction (kWh): ``sqrt(s^2 + (c mu)^2)``."""
@@ -326,19 +336,14 @@ class PlannedTripCalibrator:
         raw = self.correct(raw, rows)
         mu, sd = raw.mean, np.where(rows, self._normaliser(raw.mean, raw.std), raw.std)
         n = len(mu)
-        qs = np.full(n, np.nan if cal.quantile is None else 0.0)
-        q1s = np.full(n, np.nan if cal.quantile_one is None else 0.0)
-        if cal.quantile is not None:
-            qs += cal.quantile
-        if cal.quantile_one is not None:
-            q1s += cal.quantile_one
+        qs, q1s = (np.full(n, np.nan) if q_ is None else np.zeros(n) + q_
+                   for q_ in (cal.quantile, cal.quantile_one))
         qs[rows], q1s[rows] = q, q1
         lo, hi, lo_one = (np.array(a, float, copy=True) for a in (cal.lo, cal.hi, cal.lo_one))
         lo[rows], hi[rows] = mu[rows] - q * sd[rows], mu[rows] + q * sd[rows]
         lo_one[rows] = mu[rows] - q1 * sd[rows]
-        mean = np.where(rows, mu, cal.mean)
-        std = np.where(rows, sd, cal.std)
-        return raw, CalibratedInterval(mean=mean, std=std, lo=lo, hi=hi, lo_one=lo_one,
+        return raw, CalibratedInterval(mean=np.where(rows, mu, cal.mean),
+                                       std=np.where(rows, sd, cal.std), lo=lo, hi=hi, lo_one=lo_one,
                                        spread_factor=cal.spread_factor, quantile=qs,
                                        quantile_one=q1s)
 
@@ -369,14 +374,11 @@ class PlannedTripCalibrator:
         return {"residuals": self.residuals_, "gap": self.gap_, "coef": self.coef_,
                 "conditions_range": self.conditions_range_,
                 "excess_rel": np.array([self.excess_rel_]),
-                "smoothed": np.array([float(self.smoothed_)]),
-                **{f"trace_gap.{k}": v for k, v in self._gap_arrays().items()},
+                "smoothed": np.array([float(self.smoothed_)]), "rule": np.array([self.rule_]),
+                **{f"trace_gap.{k}": v for k, v in (self.trace_gap_.to_arrays().items() if
+                                                     getattr(self, "trace_gap_", None) is not None else ())},
                 **{f"graded.{k}": v for k, v in (self.graded_.to_arrays().items()
                                                   if self.graded_ is not None else ())}}
-
-    def _gap_arrays(self) -> dict[str, np.ndarray]:
-        gap = getattr(self, "trace_gap_", None)
-        return {} if gap is None else gap.to_arrays()
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> PlannedTripCalibrator:
@@ -404,6 +406,7 @@ class PlannedTripCalibrator:
         out.residuals_, out.gap_, out.coef_, out.conditions_range_ = r, g, coef, rng_
         out.excess_rel_ = float(c[0])
         out.smoothed_ = bool(np.any(np.asarray(a.get("smoothed", 0.0), float)))  # older: no
+        out.rule_ = saved_rule(a)  # older files: rule 1
         graded = {k[len("graded."):]: v for k, v in a.items() if k.startswith("graded.")}
         out.graded_ = cls.from_arrays(graded) if graded else None  # older files: none
         gap = {k[len("trace_gap."):]: v for k, v in a.items() if k.startswith("trace_gap.")}

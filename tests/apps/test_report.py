@@ -239,6 +239,9 @@ def test_cli_exit_2_when_no_row_is_valid(tmp_path, capsys):
 @pytest.mark.parametrize("args, needle", [
     (["--level", "1.5"], "--level=1.5"),
     (["--test-fraction", "0"], "test_fraction=0.0"),
+    (["--posterior-steps", "0"], "--posterior-steps=0"),
+    (["--posterior-steps", "20001"], "--posterior-steps=20001"),
+    (["--posterior-steps", "50", "--by", "vehicle_id"], "without --by"),
 ])
 def test_cli_exit_2_on_bad_options(run, tmp_path, capsys, args, needle):
     code = main(["calibrate", str(run["dir"] / "measured.csv"), "--out", str(tmp_path / "r"),
@@ -246,6 +249,22 @@ def test_cli_exit_2_on_bad_options(run, tmp_path, capsys, args, needle):
     assert code == 2
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+def test_cli_posterior_steps_fixes_the_report_posteriors_run(run, tmp_path, monkeypatch):
+    """--posterior-steps N reaches calibrate_physics as n_steps=N (default: adaptive, None);
+    the report's summary records it (tests/core/test_crash_paths.py, end to end)."""
+    seen = []
+
+    def fake(*args, **kwargs):
+        seen.append(kwargs["calibrate_kwargs"])
+        raise ValueError("stop after the arguments")
+
+    monkeypatch.setattr(R, "calibration_report", fake)
+    m = str(run["dir"] / "measured.csv")
+    assert main(["calibrate", m, "--out", str(tmp_path / "a"), "--posterior-steps", "40"]) == 2
+    assert main(["calibrate", m, "--out", str(tmp_path / "b")]) == 2
+    assert seen == [{"n_steps": 40}, {}]
 
 
 @pytest.mark.slow

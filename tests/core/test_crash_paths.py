@@ -1,5 +1,5 @@
 """Fault injection on the real write paths: model folder, prediction file, fleet folder,
-report folder and demo folder (slow: each case starts a fresh process that imports torch).
+report folder and demo folder (slow: each case runs the writer in new processes).
 
 As in :mod:`tests.core.test_crash`: an old output is written, a run that would
 write a different new output is killed at a named step (``HYBRIDEV_FAULT``),
@@ -9,7 +9,14 @@ next run writes the new output and leaves nothing else beside it.
 The old output and the reference new output of each writer are written once per
 module by real runs (:func:`_made`); each case starts from a copy of the old
 output's folder (the same bytes: ownership and manifests are by content and
-relative name), so a case costs two fresh processes, the killed run and the next one.
+relative name), so a case costs two processes, the killed run and the next one.
+
+Those processes are fresh interpreters (``python -m hybridev.cli ...``) for the cases of
+each writer's first step (every signal) and for the report's SIGTERM case; the other
+cases run the same command in a forked child of one warm server per module
+(``tests/docs/warm_cli.py``: the child gets the case's environment, so
+``HYBRIDEV_FAULT``, and is killed by the real signal at the named step), which saves each
+process the 3-4 CPU-seconds of importing torch, dask and the rest.
 """
 
 import hashlib
@@ -28,18 +35,29 @@ import pytest
 from hybridev.core import swap
 from hybridev.core.outputs import MANIFEST_FILE, REGISTER_FILE
 
+sys.path.insert(0, str(Path(__file__).parents[1] / "docs"))
+from warm_cli import WarmCli, client_argv  # tests/docs is not a package
+
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).parents[2]
 SIGNALS = ("SIGINT", "SIGTERM", "SIGKILL")
 DIR_STEPS = [s for s in swap.STEPS["dir"] if s != "dir.old_moved"]
 
 
-def _py(args, fault=None, timeout=600):
+def _py(args, fault=None, timeout=600, warm=None):
+    """``python *args`` (``-m hybridev.cli ...`` or ``-c CODE``) in a fresh interpreter, or
+    through the warm server ``warm``; ``fault``: ``HYBRIDEV_FAULT`` of the run."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("HYBRIDEV_FAULT", None)
     if fault:
         env["HYBRIDEV_FAULT"] = fault
-    return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
+    cmd, program = [sys.executable, *args], None
+    if warm is not None and args[:2] == ["-m", "hybridev.cli"]:
+        cmd = client_argv(warm, args[2:])
+    elif warm is not None:
+        assert args[0] == "-c" and len(args) == 2, args
+        cmd, program = client_argv(warm, [], python=True), args[1]
+    return subprocess.run(cmd, env=env, input=program, capture_output=True, text=True,
                           timeout=timeout, preexec_fn=lambda: [
                               signal.signal(s, signal.SIG_DFL)
                               for s in (signal.SIGINT, signal.SIGTERM)])
@@ -95,21 +113,36 @@ def _complete(path: Path) -> bool:
 
 
 @pytest.fixture(scope="module")
+def warm(tmp_path_factory):
+    """The warm ``hybridev`` server of the module's cases (see the module docstring)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    env.pop("HYBRIDEV_FAULT", None)
+    cli = WarmCli(tmp_path_factory.mktemp("warm"), env)
+    yield cli
+    cli.close()
+
+
+@pytest.fixture(scope="module")
 def made(tmp_path_factory):
     """Folder of the once-written old and reference outputs, by writer."""
     return tmp_path_factory.mktemp("made")
 
 
-def _made(write, made: Path, key: str, name: str):
-    """``(folder holding the old output, new snapshot)`` of writer ``key``, written once."""
+def _made(write, made: Path, key: str, name: str, deterministic: bool = True):
+    """``(folder holding the old output, new snapshot)`` of writer ``key``, written once.
+
+    ``deterministic=False``: no reference run (two runs' outputs differ), new snapshot None."""
     home = made / key
     if not home.exists():
         work = made / f".{key}"
         (work / "ref").mkdir(parents=True)
         (work / "old").mkdir()
-        r = write("2", work / "ref" / name, None)
-        assert r.returncode == 0, r.stderr
-        (work / "new.json").write_text(json.dumps(snapshot(work / "ref" / name)))
+        new = None
+        if deterministic:
+            r = write("2", work / "ref" / name, None)
+            assert r.returncode == 0, r.stderr
+            new = snapshot(work / "ref" / name)
+        (work / "new.json").write_text(json.dumps(new))
         r = write("1", work / "old" / name, None)
         assert r.returncode == 0, r.stderr
         work.rename(home)
@@ -123,7 +156,7 @@ def _case(write, target: Path, step: str, sig: str, expected: set[str], made: Pa
     ``deterministic=False`` (a report, which records its own run time): the new output of
     two runs differs, so "the complete new output" is a folder other than the old one
     that its manifest describes completely."""
-    old_dir, new = _made(write, made, key, target.name)
+    old_dir, new = _made(write, made, key, target.name, deterministic)
     shutil.copytree(old_dir, target.parent, symlinks=True)  # the old output, as written
     old = snapshot(target)
     assert old is not None and old != new
@@ -143,21 +176,25 @@ def _case(write, target: Path, step: str, sig: str, expected: set[str], made: Pa
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_model_folder(files, made, tmp_path, step, sig):
+def test_model_folder(files, made, warm, tmp_path, step, sig):
+    server = None if step == DIR_STEPS[0] else warm
+
     def write(v, path, fault):
-        code = ("import sys; from hybridev import HybridModel; "
-                "HybridModel.load(sys.argv[1]).save(sys.argv[2])")
-        return _py(["-c", code, str(files / f"model{v}"), str(path)], fault)
+        code = (f"from hybridev import HybridModel; "
+                f"HybridModel.load({str(files / f'model{v}')!r}).save({str(path)!r})")
+        return _py(["-c", code], fault, warm=server)
 
     _case(write, tmp_path / "out" / "m", step, sig, {"m"}, made, "model")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", swap.STEPS["file"])
-def test_prediction_file(files, made, tmp_path, step, sig):
+def test_prediction_file(files, made, warm, tmp_path, step, sig):
+    server = None if step == swap.STEPS["file"][0] else warm
+
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"),
-                    str(files / f"trips{v}.csv"), "--out", str(path)], fault)
+                    str(files / f"trips{v}.csv"), "--out", str(path)], fault, warm=server)
 
     _case(write, tmp_path / "out" / "p.csv", step, sig, {"p.csv", REGISTER_FILE}, made, "pred")
 
@@ -181,25 +218,33 @@ def scheduler():
 
 @pytest.mark.parametrize("sig", SIGNALS)
 @pytest.mark.parametrize("step", DIR_STEPS)
-def test_fleet_folder(files, made, scheduler, tmp_path, step, sig):
+def test_fleet_folder(files, made, scheduler, warm, tmp_path, step, sig):
+    server = None if step == DIR_STEPS[0] else warm
+
     def write(v, path, fault):
         return _py(["-m", "hybridev.cli", "predict", str(files / "model1"), str(files / f"ds{v}"),
-                    "--out", str(path), "--scheduler", scheduler], fault)
+                    "--out", str(path), "--scheduler", scheduler], fault, warm=server)
 
     _case(write, tmp_path / "out" / "preds", step, sig, {"preds"}, made, "fleet")
 
 
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_report_folder(files, made, tmp_path, sig):
+def test_report_folder(files, made, warm, tmp_path, sig):
+    server = None if sig == "SIGTERM" else warm
+
     def write(v, path, fault):
         meas = pd.read_csv(files / "measured.csv")
         src = tmp_path / f"measured{v}.csv"
         (meas if v == "1" else meas.head(50)).to_csv(src, index=False)
         return _py(["-m", "hybridev.cli", "calibrate", str(src), "--out", str(path),
-                    "--members", "1", "--max-epochs", "3", "--quiet"], fault)
+                    "--members", "1", "--max-epochs", "3", "--posterior-steps", "100",
+                    "--quiet"], fault, warm=server)
 
     _case(write, tmp_path / "out" / "rep", "dir.swapped", sig, {"rep"}, made, "report",
           deterministic=False)
+    summary = json.loads((tmp_path / "out" / "rep" / "summary.json").read_text())
+    assert summary["split"]["n_train"] + summary["split"]["n_test"] == 50  # the new input
+    assert summary["config"]["calibrate_kwargs"] == {"n_steps": 100}  # --posterior-steps
 
 
 def test_demo_folder_killed_mid_merge_is_completed_by_the_next_start(tmp_path):

@@ -11,7 +11,8 @@ here (they create environments and download packages).
 * Default suite: the model fits are made small (:data:`FAST`: 2 networks, 15 epochs;
   :data:`PAGE_FAST`: fewer trips where a page's fit is dear), which changes the
   numbers, not the commands; every substitution must match.
-* Slow: the pages exactly as written, and the fleet page (a dask cluster).
+* Slow: the pages exactly as written, and the fleet page (a dask cluster; with the
+  default suite's substitutions and half its vehicles).
 
 ``hybridev`` and the python blocks run in one warm server per test process
 (``warm_cli.py``: forked per call, no re-import of torch); the console command in a
@@ -47,6 +48,9 @@ PAGE_FAST = {  # page: further (pattern, replacement), smaller data where the pa
     # (22 CPU-seconds), about 5,700 on 50; the code is the same, the numbers smaller
     "../README.md": ((r"make_dataset\(300,", "make_dataset(60,"),
                      (r"iloc\[:250\]", "iloc[:50]"), (r"iloc\[250:\]", "iloc[50:]")),
+    # the fleet page (slow): half the vehicles, the same commands (a posterior and a model
+    # per vehicle; 6 still make a fleet prior and the robust z-scores of the flags)
+    "how-to/fleet.md": ((r"make_fleet\(n_vehicles=12,", "make_fleet(n_vehicles=6,"),),
 }
 _BLOCK = re.compile(r"^```(\w+)\n(.*?)^```\s*$", re.M | re.S)
 

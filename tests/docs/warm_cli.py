@@ -32,7 +32,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["WarmCli", "client_main", "hybridev_bin", "serve"]
+__all__ = ["WarmCli", "client_argv", "client_main", "hybridev_bin", "serve"]
 
 _MAX_MSG = 1 << 22
 
@@ -136,6 +136,20 @@ def client_main(sock_path: str, argv: list[str], python: bool = False) -> int:
     return int(answer) if answer else 1
 
 
+def _default_signals() -> None:
+    """SIGINT and SIGTERM as in an interactive shell (a background job ignores SIGINT)."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
+def client_argv(warm: WarmCli, argv: list[str], python: bool = False) -> list[str]:
+    """The command line of one call of ``hybridev argv`` (or ``python -``) through ``warm``."""
+    return [sys.executable, "-S", "-E", __file__, "python" if python else "client", warm.sock,
+            *argv]
+
+
 def hybridev_bin(workdir: Path, warm: WarmCli | None = None) -> Path:
     """``workdir/bin`` holding a ``hybridev`` command for ``PATH``: a fresh interpreter per
     call, or the client of the warm server ``warm``."""
@@ -156,8 +170,9 @@ class WarmCli:
     def __init__(self, folder: Path, env: dict[str, str]):
         folder.mkdir(parents=True, exist_ok=True)
         self.sock = str(folder / "hybridev.sock")
-        self.proc = subprocess.Popen([sys.executable, __file__, "serve", self.sock], env=env,
-                                     stdout=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(  # the signals' default actions, as a terminal gives
+            [sys.executable, __file__, "serve", self.sock], env=env, stdout=subprocess.PIPE,
+            text=True, preexec_fn=_default_signals)
         line = self.proc.stdout.readline()
         if line.strip() != "ready":
             self.proc.wait(timeout=60)

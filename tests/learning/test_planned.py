@@ -439,3 +439,21 @@ def test_planned_mean_correction_is_dropped_when_a_fold_gets_worse():
     assert np.any(kept.coef_ != 0)  # blocks of trips mix the fifth group in: kept
     cal = PlannedTripCalibrator().fit(y, mean, 0.05 * mean, conditions=cond, fold=fold)
     np.testing.assert_array_equal(cal.coef_, 0.0)
+
+
+def test_scored_inputs_are_kept_reproduce_the_scores_and_are_not_saved():
+    """``scored_`` (for studies) holds the corrected inputs the scores came from:
+    ``(y - mean) / sqrt(std^2 + fold_var + (c mean)^2)`` is ``residuals_``; not saved."""
+    rng = np.random.default_rng(3)
+    n = 60
+    mu = rng.uniform(2.0, 20.0, n)
+    s, v = 0.02 * mu, (0.01 * mu) ** 2
+    y = mu * (1.0 + 0.08 * rng.standard_normal(n))
+    cal = PlannedTripCalibrator().fit(y, mu, s, fold_var=v)
+    sc = cal.scored_
+    r = (sc["y"] - sc["mean"]) / np.sqrt(sc["std"] ** 2 + sc["fold_var"]
+                                          + (cal.excess_rel_ * sc["mean"]) ** 2)
+    np.testing.assert_allclose(r, cal.residuals_, rtol=1e-12)
+    assert cal.excess_rel_ > 0.0
+    back = PlannedTripCalibrator.from_arrays(cal.to_arrays())
+    assert not hasattr(back, "scored_")

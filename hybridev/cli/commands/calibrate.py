@@ -30,6 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--members", type=int, default=5, help="ensemble size (default 5)")
     p.add_argument("--max-epochs", type=int, default=200,
                    help="at most this many training epochs (default 200)")
+    p.add_argument("--posterior-steps", type=int, default=None, metavar="N",
+                   help="run the MCMC of the report's calibrated-physics posterior for "
+                        "exactly N steps, N in [1, 20000], instead of adaptively to convergence "
+                        "(default: adaptive; a short run is for quick checks of the "
+                        "pipeline, its intervals are not converged)")
     p.add_argument("--test-fraction", type=float, default=0.2,
                    help="share of groups (or trips) held out for scoring (default 0.2)")
     p.add_argument("--group-column", default="auto",
@@ -63,6 +68,13 @@ def run(args: argparse.Namespace) -> int:
     check_seed(args.seed, "--seed")
     if not 0.0 < args.level < 1.0:
         raise ValueError(f"--level={args.level!r} is outside the allowed range (0, 1)")
+    steps = getattr(args, "posterior_steps", None)
+    if steps is not None and not 1 <= steps <= 20000:
+        raise ValueError(f"--posterior-steps={steps!r} is outside the allowed "
+                         "range [1, 20000]")
+    if steps is not None and getattr(args, "by", None) is not None:
+        raise ValueError("--posterior-steps applies to single-vehicle calibration only "
+                         "(without --by)")
     if getattr(args, "by", None) is not None:  # fleet: hybridev.fleet.cli.run_calibrate_by
         from hybridev.core.plugins import entry_point
 
@@ -85,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         measured, out_dir=args.out, vehicle=vehicle, seed=args.seed, level=args.level,
         n_members=args.members, test_fraction=args.test_fraction,
         group_column=args.group_column, model_params={"max_epochs": args.max_epochs},
+        calibrate_kwargs={} if steps is None else {"n_steps": steps},
         quiet=args.quiet, source=str(args.measured))
     m, sp = summary["metrics"], summary["split"]
     row = next((r for r in m["hybrid"].get("coverage_table", [])
