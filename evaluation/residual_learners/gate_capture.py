@@ -146,6 +146,26 @@ def capture(vehicle, m, out_prefix: Path, split_seed=None) -> None:
         cvplus._training_arrays = orig_arrays
 
 
+def cached_residuals(cache: Path, key: str):
+    """Relative residuals of the physics part in a cache written by :func:`capture`.
+
+    One row per (trip, outer fold): ``label``, ``fold``, ``kind`` ("held-out" or
+    "training OOF"), the measured ``y`` and predicted ``p`` energy (kWh) and
+    ``rel = (y - p) / p``.
+    """
+    import pandas as pd
+    rows = []
+    for k, f in enumerate(sorted(cache.glob(f"{key}_fold*.npz"))):
+        z = np.load(f, allow_pickle=True)
+        rows.append(pd.DataFrame({"label": z["test_labels"], "fold": k, "kind": "held-out",
+                                  "y": z["y_te"], "p": z["p_te"]}))
+        rows.append(pd.DataFrame({"label": z["labels"], "fold": k, "kind": "training OOF",
+                                  "y": z["e"], "p": z["p"]}))
+    r = pd.concat(rows, ignore_index=True)
+    r["rel"] = (r["y"] - r["p"]) / r["p"]
+    return r
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=rl.rw.DEFAULT_DATA)

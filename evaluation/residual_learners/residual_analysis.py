@@ -56,6 +56,7 @@ import pandas as pd
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import gate_capture  # noqa: E402
 import residual_learners as rl  # noqa: E402
 
 # name: (description, unit, diagnostic?)
@@ -150,16 +151,7 @@ def trip_variables(data: Path, labels: pd.Index, trips: pd.DataFrame,
 
 
 def residuals(cache: Path) -> pd.DataFrame:
-    rows = []
-    for k, f in enumerate(sorted(cache.glob("M1_fold*.npz"))):
-        z = np.load(f, allow_pickle=True)
-        rows.append(pd.DataFrame({"label": z["test_labels"], "fold": k, "kind": "held-out",
-                                  "y": z["y_te"], "p": z["p_te"]}))
-        rows.append(pd.DataFrame({"label": z["labels"], "fold": k, "kind": "training OOF",
-                                  "y": z["e"], "p": z["p"]}))
-    r = pd.concat(rows, ignore_index=True)
-    r["rel"] = (r["y"] - r["p"]) / r["p"]
-    return r
+    return gate_capture.cached_residuals(cache, "M1")
 
 
 def mape(y, p) -> float:

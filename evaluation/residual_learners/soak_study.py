@@ -50,6 +50,7 @@ import pandas as pd
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import gate_capture  # noqa: E402
 import residual_learners as rl  # noqa: E402
 
 from hybridev.physics.stats import energy_from_stats  # noqa: E402
@@ -67,16 +68,8 @@ COLD_TAU_GRID_S = [np.inf, 600.0, 1800.0, 3600.0, 7200.0, 14400.0, 36000.0]
 def residuals(cache: Path, key: str) -> pd.DataFrame:
     """Out-of-fold relative residuals of the physics part, one row per (trip, outer fold)."""
     trips = pd.read_pickle(cache / f"{key}_trips.pkl")
-    rows = []
-    for k, f in enumerate(sorted(cache.glob(f"{key}_fold*.npz"))):
-        z = np.load(f, allow_pickle=True)
-        rows.append(pd.DataFrame({"label": z["test_labels"], "fold": k, "kind": "held-out",
-                                  "y": z["y_te"], "p": z["p_te"]}))
-        rows.append(pd.DataFrame({"label": z["labels"], "fold": k, "kind": "training OOF",
-                                  "y": z["e"], "p": z["p"]}))
-    r = pd.concat(rows, ignore_index=True)
+    r = gate_capture.cached_residuals(cache, key)
     r = r.join(trips[["temperature_c", "parked_min", "duration_s"]], on="label")
-    r["rel"] = (r["y"] - r["p"]) / r["p"]
     r["park_bin"] = pd.cut(r["parked_min"].fillna(np.inf), PARK_EDGES_MIN, labels=PARK_LABELS)
     r["temp_bin"] = pd.cut(r["temperature_c"], TEMP_EDGES_C, labels=TEMP_LABELS)
     return r
