@@ -21,14 +21,13 @@ are unchanged.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from hybridev.learning.conformal import NormalizedConformal
 from hybridev.learning.planned_bias import excess_rel
-from hybridev.learning.smoothed import SmoothedConformal, harrell_davis
+from hybridev.learning.smoothed import SmoothedConformal
 
 __all__ = ["RULE", "LevelCorrectedSmoothed", "conformal_rule", "hd_level", "lodo_excess_rel",
            "saved_rule"]
@@ -65,13 +64,8 @@ class LevelCorrectedSmoothed(SmoothedConformal):
     True
     """
 
-    def _order_stat(self, sorted_scores: np.ndarray, level: float) -> float:
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
-        n = self.n_calibration
-        if math.ceil((n + 1) * level) > n:
-            return math.inf
-        return harrell_davis(sorted_scores, hd_level(level, n))
+    def _hd_level(self, level: float) -> float:
+        return hd_level(level, self.n_calibration)
 
 
 def lodo_excess_rel(y, mean, std, inside, groups) -> np.ndarray:

@@ -69,4 +69,8 @@ class SmoothedConformal(NormalizedConformal):
             raise ValueError(f"level={level!r} is outside the allowed range (0, 1)")
         if math.ceil((self.n_calibration + 1) * level) > self.n_calibration:
             return math.inf
-        return harrell_davis(sorted_scores, level)
+        return harrell_davis(sorted_scores, self._hd_level(level))
+
+    def _hd_level(self, level: float) -> float:
+        """Level at which the Harrell-Davis quantile of ``level`` is taken."""
+        return level

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hybridev.physics.battery import with_battery_loss
+from hybridev.physics.battery import battery_loss_fraction
 from hybridev.physics.climate import _profile_values, hvac_power_kw
 from hybridev.physics.derate import regen_derate_factor, soc_drop_estimate
 from hybridev.physics.params import PROFILES, ProfileLike, VehicleParams
@@ -324,9 +324,7 @@ def trace_power_kw(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
         out += veh.drive_loss_kw * ((v[..., 1:] + v[..., :-1]) > 2.0 * MOVING_MPS)
     if soc is not None and veh.cell_resistance_ohm_ah:  # the trip's factor on every interval
         e = out.sum(axis=-1) * (np.asarray(dt, dtype=float)[..., 0] if np.ndim(dt) else dt) / 3600.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            k = np.where(e != 0, _trip_loss(veh, e, temperature_c, soc, v, dt) / e, 1.0)
-        out *= np.asarray(k)[..., None]
+        out *= np.asarray(_trip_factor(veh, e, temperature_c, soc, v, dt))[..., None]
     return out
 
 
@@ -371,13 +369,14 @@ def trace_energy_kwh(speed_mps, dt_s, *, vehicle: VehicleParams | None = None,
     e = _battery_energy_kwh(_wheel_power_w(v, dt, veh, th), dt, mult_eta, eta_r, aux, cap)
     if veh.drive_loss_kw:
         e = e + (veh.drive_loss_kw * _moving_steps(v) * (dt / 3600.0))[..., 0]
-    return _trip_loss(veh, e, temperature_c, soc, v, dt)
+    return e * _trip_factor(veh, e, temperature_c, soc, v, dt)
 
 
-def _trip_loss(veh: VehicleParams, e, temperature_c, soc, v: np.ndarray, dt):
-    """``e`` (per trip) with the pack's resistance at the trip's SoC (physics.battery)."""
+def _trip_factor(veh: VehicleParams, e, temperature_c, soc, v: np.ndarray, dt):
+    """``1 + f`` per trip (the shape of ``e``), ``f`` the pack's resistance loss at the
+    trip's SoC (:func:`~hybridev.physics.battery.battery_loss_fraction`); 1.0 without it."""
     if soc is None or not veh.cell_resistance_ohm_ah:
-        return e
+        return 1.0
     s = np.asarray(_per_trip(soc, v, "soc"), dtype=float)
     if np.any(np.isfinite(s) & ((s < 0) | (s > 1))):
         raise ValueError(f"soc={soc!r} is outside the allowed range [0, 1] (NaN: unknown)")
@@ -387,8 +386,8 @@ def _trip_loss(veh: VehicleParams, e, temperature_c, soc, v: np.ndarray, dt):
         x = np.asarray(x, dtype=float)
         return np.broadcast_to(x.reshape(-1) if x.ndim else x, shp)
 
-    return with_battery_loss(veh, e, per_trip(_per_trip(temperature_c, v, "temperature_c")),
-                             per_trip(s), per_trip(dt * (v.shape[-1] - 1)))
+    return 1.0 + battery_loss_fraction(veh, per_trip(_per_trip(temperature_c, v, "temperature_c")),
+                                       per_trip(s), e, per_trip(dt * (v.shape[-1] - 1)))
 
 
 def soc_trajectory(speed_mps, dt_s, soc_initial, *, vehicle: VehicleParams | None = None,
